@@ -1,0 +1,120 @@
+"""Rigid-transform helpers shared by every service.
+
+Conventions (see docs/conventions.md): SI units, right-handed frames, quaternions in ROS order
+``(x, y, z, w)``, and ``T_a_b`` is a 4x4 float64 matrix that maps points expressed in frame ``b`` into
+frame ``a`` (``p_a = T_a_b @ p_b``). Keeping these in one place is what lets the arm, the sim, the
+registration and the grasp planner agree on what a pose means.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+
+def make_transform(rotation: np.ndarray | None = None, translation: np.ndarray | None = None) -> np.ndarray:
+    """Build a 4x4 homogeneous transform from a 3x3 rotation and a 3-vector translation."""
+    T = np.eye(4)
+    if rotation is not None:
+        T[:3, :3] = rotation
+    if translation is not None:
+        T[:3, 3] = np.asarray(translation, dtype=float).reshape(3)
+    return T
+
+
+def invert(T: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid transform, computed from R^T rather than a general matrix inverse."""
+    R = T[:3, :3]
+    out = np.eye(4)
+    out[:3, :3] = R.T
+    out[:3, 3] = -R.T @ T[:3, 3]
+    return out
+
+
+def transform_points(T: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply ``T`` to an (N, 3) array; returns the dtype of ``points``."""
+    pts = np.asarray(points)
+    out = pts.astype(np.float64) @ T[:3, :3].T + T[:3, 3]
+    return out.astype(pts.dtype, copy=False)
+
+
+def rotate_vectors(T: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """Rotate direction vectors (normals) by the rotation part of ``T``."""
+    vec = np.asarray(vectors)
+    return (vec.astype(np.float64) @ T[:3, :3].T).astype(vec.dtype, copy=False)
+
+
+def quat_xyzw_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrix from a quaternion in ROS order (x, y, z, w); the quaternion is normalised."""
+    return Rotation.from_quat(np.asarray(q, dtype=float)).as_matrix()
+
+
+def matrix_to_quat_xyzw(R: np.ndarray) -> np.ndarray:
+    """Quaternion (x, y, z, w) with w >= 0, so equal rotations compare equal."""
+    q = Rotation.from_matrix(np.asarray(R, dtype=float)).as_quat()
+    return -q if q[3] < 0 else q
+
+
+def pose_to_matrix(position: np.ndarray, quat_xyzw: np.ndarray) -> np.ndarray:
+    """4x4 transform from a position and an (x, y, z, w) quaternion."""
+    return make_transform(quat_xyzw_to_matrix(quat_xyzw), position)
+
+
+def matrix_to_pose(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(position, quaternion xyzw) of a 4x4 transform."""
+    return T[:3, 3].copy(), matrix_to_quat_xyzw(T[:3, :3])
+
+
+def rotation_about_axis(axis: np.ndarray, angle_rad: float) -> np.ndarray:
+    """3x3 rotation of ``angle_rad`` about a (not necessarily unit) axis."""
+    axis = np.asarray(axis, dtype=float)
+    axis = axis / np.linalg.norm(axis)
+    return Rotation.from_rotvec(axis * angle_rad).as_matrix()
+
+
+def rotation_about_line(axis: np.ndarray, point: np.ndarray, angle_rad: float) -> np.ndarray:
+    """4x4 transform rotating by ``angle_rad`` about the line through ``point`` along ``axis``.
+
+    This is how a turn of the object on the table is expressed: about the table normal, through the
+    object's centre.
+    """
+    R = rotation_about_axis(axis, angle_rad)
+    p = np.asarray(point, dtype=float).reshape(3)
+    return make_transform(R, p - R @ p)
+
+
+def rotation_angle_deg(R: np.ndarray) -> float:
+    """Angle of a rotation matrix in degrees (0..180), robust to rounding just outside [-1, 1]."""
+    c = (np.trace(R[:3, :3]) - 1.0) / 2.0
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def transform_error(T_est: np.ndarray, T_true: np.ndarray) -> tuple[float, float]:
+    """(translation error in metres, rotation error in degrees) between two transforms."""
+    delta = invert(T_true) @ T_est
+    return float(np.linalg.norm(delta[:3, 3])), rotation_angle_deg(delta[:3, :3])
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = (0.0, 0.0, 1.0)) -> np.ndarray:
+    """``T_world_camera`` of an optical-frame camera (z forward, x right, y down) at ``eye`` looking at ``target``.
+
+    ``up`` is the world direction that should appear upward in the image.
+    """
+    eye = np.asarray(eye, dtype=float)
+    z = np.asarray(target, dtype=float) - eye
+    z /= np.linalg.norm(z)
+    up = np.asarray(up, dtype=float)
+    x = np.cross(z, -up)
+    if np.linalg.norm(x) < 1e-9:  # looking straight along `up`: pick any perpendicular
+        x = np.cross(z, [1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.cross(z, [0.0, 1.0, 0.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return make_transform(np.column_stack([x, y, z]), eye)
+
+
+def yaw_deg_about(axis: np.ndarray, R: np.ndarray) -> float:
+    """Signed rotation angle of ``R`` about ``axis`` in degrees, for measuring an achieved turn."""
+    axis = np.asarray(axis, dtype=float)
+    axis = axis / np.linalg.norm(axis)
+    rotvec = Rotation.from_matrix(R[:3, :3]).as_rotvec()
+    return float(np.degrees(np.dot(rotvec, axis)))

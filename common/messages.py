@@ -1,0 +1,225 @@
+"""The wire messages every service speaks.
+
+Each is a plain dataclass; the codec (``common.codec``) derives the wire form and the validation from
+the field types and array specs. Arrays stay numpy arrays end to end. A service that needs a new request
+or reply type adds it here (or in its own module, subclassing ``Message``) so every peer can decode it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from common.codec import Message, array_field
+from common.errors import WireError
+
+
+@dataclass(kw_only=True)
+class Intrinsics(Message):
+    """Pinhole intrinsics of the color image (depth is aligned to color)."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    def validate(self) -> None:
+        if self.width <= 0 or self.height <= 0 or self.fx <= 0 or self.fy <= 0:
+            raise WireError("intrinsics must be positive", code="bad_value",
+                            detail={"width": self.width, "height": self.height, "fx": self.fx, "fy": self.fy})
+
+    @property
+    def K(self) -> np.ndarray:
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def as_dict(self) -> dict[str, float]:
+        return {"width": self.width, "height": self.height, "fx": self.fx, "fy": self.fy,
+                "cx": self.cx, "cy": self.cy}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Intrinsics:
+        return cls(int(d["width"]), int(d["height"]), float(d["fx"]), float(d["fy"]),
+                   float(d["cx"]), float(d["cy"]))
+
+
+@dataclass(kw_only=True)
+class RGBDFrame(Message):
+    """One aligned RGB-D capture with the camera pose in ``base`` as the robot believes it.
+
+    ``T_base_camera_true`` is filled only by the simulator: ground truth, for evaluation only, never
+    read by the pipeline.
+    """
+
+    color: np.ndarray = array_field("u1", (None, None, 3))
+    depth: np.ndarray = array_field("<u2", (None, None))
+    depth_scale: float = 0.001
+    intrinsics: Intrinsics = field(default_factory=lambda: Intrinsics(640, 480, 615.0, 615.0, 320.0, 240.0))
+    T_base_camera: np.ndarray = array_field("<f8", (4, 4))
+    stamp: float = 0.0
+    seq: int = 0
+    T_base_camera_true: np.ndarray | None = array_field("<f8", (4, 4), optional=True)
+    meta: dict = field(default_factory=dict)
+
+    def validate(self) -> None:
+        h, w = self.depth.shape
+        if self.color.shape[:2] != (h, w):
+            raise WireError("color and depth sizes differ", code="bad_shape",
+                            detail={"color": list(self.color.shape), "depth": list(self.depth.shape)})
+        if (w, h) != (self.intrinsics.width, self.intrinsics.height):
+            raise WireError("image size differs from intrinsics", code="bad_shape",
+                            detail={"image": [w, h], "intrinsics": [self.intrinsics.width, self.intrinsics.height]})
+        if self.depth_scale <= 0:
+            raise WireError("depth_scale must be positive", code="bad_value")
+
+
+@dataclass(kw_only=True)
+class PointCloud(Message):
+    """Points in ``frame`` (metres), optional 8-bit colors and unit normals, one row per point."""
+
+    xyz: np.ndarray = array_field("<f4", (None, 3))
+    rgb: np.ndarray | None = array_field("u1", (None, 3), optional=True)
+    normals: np.ndarray | None = array_field("<f4", (None, 3), optional=True)
+    frame: str = "base"
+
+    def validate(self) -> None:
+        n = self.xyz.shape[0]
+        for name in ("rgb", "normals"):
+            arr = getattr(self, name)
+            if arr is not None and arr.shape[0] != n:
+                raise WireError(f"{name} has {arr.shape[0]} rows, xyz has {n}", code="bad_shape",
+                                detail={"field": name})
+
+    def __len__(self) -> int:
+        return int(self.xyz.shape[0])
+
+
+@dataclass(kw_only=True)
+class Pose(Message):
+    """Position (m) and unit quaternion (x, y, z, w) of ``child`` in ``frame``."""
+
+    position: np.ndarray = array_field("<f8", (3,))
+    orientation: np.ndarray = array_field("<f8", (4,))
+    frame: str = "base"
+
+    def validate(self) -> None:
+        norm = float(np.linalg.norm(self.orientation))
+        if abs(norm - 1.0) > 1e-3:
+            raise WireError("orientation is not a unit quaternion", code="bad_value", detail={"norm": norm})
+
+    def matrix(self) -> np.ndarray:
+        from common.geometry import pose_to_matrix
+
+        return pose_to_matrix(self.position, self.orientation)
+
+    @classmethod
+    def from_matrix(cls, T: np.ndarray, frame: str = "base") -> Pose:
+        from common.geometry import matrix_to_pose
+
+        p, q = matrix_to_pose(T)
+        return cls(position=p, orientation=q, frame=frame)
+
+
+@dataclass(kw_only=True)
+class Transform(Message):
+    """``matrix`` = T_parent_child: maps points in ``child`` into ``parent``."""
+
+    matrix: np.ndarray = array_field("<f8", (4, 4))
+    parent: str = "base"
+    child: str = ""
+
+    def validate(self) -> None:
+        R = self.matrix[:3, :3]
+        if not np.allclose(R @ R.T, np.eye(3), atol=1e-4) or not np.allclose(self.matrix[3], [0, 0, 0, 1]):
+            raise WireError("matrix is not a rigid transform", code="bad_value")
+
+
+@dataclass(kw_only=True)
+class JointState(Message):
+    """Joint positions (rad, or m for the gripper), velocities, efforts; TCP and camera poses in base."""
+
+    names: list[str] = field(default_factory=list)
+    position: np.ndarray = array_field("<f8", (None,))
+    velocity: np.ndarray | None = array_field("<f8", (None,), optional=True)
+    effort: np.ndarray | None = array_field("<f8", (None,), optional=True)
+    stamp: float = 0.0
+    T_base_gripper: np.ndarray | None = array_field("<f8", (4, 4), optional=True)
+    T_base_camera: np.ndarray | None = array_field("<f8", (4, 4), optional=True)
+    gripper_opening: float = 0.0
+    moving: bool = False
+
+    def validate(self) -> None:
+        if len(self.names) != self.position.shape[0]:
+            raise WireError("names and position lengths differ", code="bad_shape")
+
+
+@dataclass(kw_only=True)
+class Plane(Message):
+    """A plane ``normal . p + offset = 0`` with a unit normal (pointing up for the table) and a centre."""
+
+    normal: np.ndarray = array_field("<f8", (3,))
+    offset: float = 0.0
+    center: np.ndarray = array_field("<f8", (3,))
+    frame: str = "base"
+
+    def validate(self) -> None:
+        if abs(float(np.linalg.norm(self.normal)) - 1.0) > 1e-3:
+            raise WireError("plane normal is not unit length", code="bad_value")
+
+    def signed_distance(self, points: np.ndarray) -> np.ndarray:
+        return np.asarray(points, dtype=np.float64) @ self.normal + self.offset
+
+
+@dataclass(kw_only=True)
+class Grasp(Message):
+    """One ranked grasp: contacts, width, the four ranking terms, and its named poses in ``base``.
+
+    ``poses`` maps names (``grasp``, ``grasp_plus15``, ``grasp_minus15``, ``pregrasp``, ...,
+    ``turn``...) to gripper poses, best first within each group.
+    """
+
+    kind: str = "frontal"  # "frontal" | "top_down"
+    contacts: np.ndarray = array_field("<f8", (2, 3))
+    width: float = 0.0
+    rank: float = 0.0
+    metrics: dict = field(default_factory=dict)
+    poses: dict = field(default_factory=dict)
+
+
+@dataclass(kw_only=True)
+class Error(Message):
+    """A typed failure reply. ``code`` is stable; ``message`` is for people; ``detail`` for specifics."""
+
+    code: str = "error"
+    message: str = ""
+    detail: dict = field(default_factory=dict)
+    service: str = ""
+
+
+@dataclass(kw_only=True)
+class Ok(Message):
+    """A reply that carries only figures (or nothing), e.g. for a move that finished."""
+
+    info: dict = field(default_factory=dict)
+
+
+@dataclass(kw_only=True)
+class Health(Message):
+    """What a service says about itself when asked: alive, busy with what, since when."""
+
+    service: str = ""
+    instance: str = ""
+    status: str = "ok"
+    busy: int = 0
+    uptime_s: float = 0.0
+    info: dict = field(default_factory=dict)
+
+
+@dataclass(kw_only=True)
+class Request(Message):
+    """A generic request: named parameters (numbers, strings, nested messages, arrays)."""
+
+    params: dict = field(default_factory=dict)
