@@ -1,0 +1,113 @@
+"""Zenoh session configuration: one optional file plus environment overrides.
+
+The same service binary runs in a test on loopback, as one of many processes on the lab's compute box,
+or on another machine against a router: only these settings change.
+
+Environment variables (all optional):
+
+| variable | meaning | default |
+|---|---|---|
+| ``OBJSCAN_ZENOH_CONFIG`` | a zenoh JSON5 config file, applied first | none |
+| ``OBJSCAN_ZENOH_MODE`` | ``peer`` or ``client`` (or ``router``) | ``peer`` |
+| ``OBJSCAN_ZENOH_CONNECT`` | comma-separated endpoints, e.g. ``tcp/127.0.0.1:7447`` | ``tcp/127.0.0.1:7447`` |
+| ``OBJSCAN_ZENOH_LISTEN`` | comma-separated endpoints to listen on | none (peers listen on ``tcp/127.0.0.1:0``) |
+| ``OBJSCAN_ZENOH_MULTICAST`` | ``1`` to enable multicast scouting | ``0`` |
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import zenoh
+
+DEFAULT_ROUTER_PORT = 7447
+DEFAULT_CONNECT = f"tcp/127.0.0.1:{DEFAULT_ROUTER_PORT}"
+
+
+def _split(value: str | None) -> list[str]:
+    return [v.strip() for v in value.split(",") if v.strip()] if value else []
+
+
+@dataclass
+class ZenohSettings:
+    """How a process joins the Zenoh network."""
+
+    mode: str = "peer"
+    connect: list[str] = field(default_factory=lambda: [DEFAULT_CONNECT])
+    listen: list[str] = field(default_factory=list)
+    multicast_scouting: bool = False
+    config_file: str | None = None
+
+    @classmethod
+    def from_env(cls, env: dict[str, str] | None = None) -> ZenohSettings:
+        env = dict(os.environ if env is None else env)
+        s = cls()
+        if env.get("OBJSCAN_ZENOH_MODE"):
+            s.mode = env["OBJSCAN_ZENOH_MODE"]
+        if "OBJSCAN_ZENOH_CONNECT" in env:
+            s.connect = _split(env["OBJSCAN_ZENOH_CONNECT"])
+        if "OBJSCAN_ZENOH_LISTEN" in env:
+            s.listen = _split(env["OBJSCAN_ZENOH_LISTEN"])
+        if "OBJSCAN_ZENOH_MULTICAST" in env:
+            s.multicast_scouting = env["OBJSCAN_ZENOH_MULTICAST"].strip().lower() in ("1", "true", "yes", "on")
+        if env.get("OBJSCAN_ZENOH_CONFIG"):
+            s.config_file = env["OBJSCAN_ZENOH_CONFIG"]
+        return s
+
+    def with_overrides(self, *, mode: str | None = None, connect: list[str] | None = None,
+                       listen: list[str] | None = None) -> ZenohSettings:
+        out = replace(self)
+        if mode:
+            out.mode = mode
+        if connect is not None:
+            out.connect = connect
+        if listen is not None:
+            out.listen = listen
+        return out
+
+    def to_env(self) -> dict[str, str]:
+        """The environment a child process needs to join the same network."""
+        env = {
+            "OBJSCAN_ZENOH_MODE": self.mode,
+            "OBJSCAN_ZENOH_CONNECT": ",".join(self.connect),
+            "OBJSCAN_ZENOH_MULTICAST": "1" if self.multicast_scouting else "0",
+        }
+        if self.listen:
+            env["OBJSCAN_ZENOH_LISTEN"] = ",".join(self.listen)
+        if self.config_file:
+            env["OBJSCAN_ZENOH_CONFIG"] = self.config_file
+        return env
+
+    def to_zenoh(self) -> zenoh.Config:
+        if self.config_file:
+            path = Path(self.config_file)
+            if not path.is_file():
+                raise FileNotFoundError(f"zenoh config file {path} does not exist")
+            conf = zenoh.Config.from_file(str(path))
+        else:
+            conf = zenoh.Config()
+        conf.insert_json5("mode", json.dumps(self.mode))
+        conf.insert_json5("scouting/multicast/enabled", "true" if self.multicast_scouting else "false")
+        if self.connect:
+            conf.insert_json5("connect/endpoints", json.dumps(self.connect))
+            if self.mode == "client":
+                conf.insert_json5("connect/timeout_ms", "-1")  # wait for the router (compose start-up order)
+        listen = self.listen or (["tcp/127.0.0.1:0"] if self.mode == "peer" and not self.config_file else [])
+        if listen:
+            conf.insert_json5("listen/endpoints", json.dumps(listen))
+        return conf
+
+
+def free_tcp_port() -> int:
+    """A TCP port that was free a moment ago on loopback (for tests and the embedded launcher)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def open_session(settings: ZenohSettings | None = None) -> zenoh.Session:
+    return zenoh.open((settings or ZenohSettings.from_env()).to_zenoh())
