@@ -1,0 +1,194 @@
+"""A D435 emulated with pyrealsense2's ``software_device``: unaligned depth + color you inject yourself.
+
+Why: CI and most desks have no camera. Injecting known depth and color through librealsense's own
+software device lets the real backend code (pipeline, ``rs.align``, filters, intrinsics, depth scale) run
+against ground truth, and ``record_db3`` turns injected frames into a ``.db3`` recording that the backend
+plays back like one taken on the robot.
+
+Verified with pyrealsense2 2.59.1:
+- the pipeline accepts the device through ``pipeline.set_device(dev)``; ``dev.add_to(ctx)`` does not make it
+  visible to ``ctx.query_devices()`` (0 devices), so a pipeline cannot find it by serial;
+- frame numbers must start at 1: a recording whose first frame is numbered 0 plays back with that frame
+  missing and the last depth frame renumbered;
+- ``depth_units`` must be registered as a read-only option on the depth sensor for
+  ``first_depth_sensor().get_depth_scale()`` to work, and is also stamped on every depth frame.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from common.messages import Intrinsics
+from services.camera.errors import BadFrameError, CameraError, CaptureTimeout
+from services.camera.intrinsics import (
+    D435_DEPTH_SCALE,
+    d435_color_intrinsics,
+    d435_depth_intrinsics,
+    d435_T_color_depth,
+)
+from services.camera.realsense.camera import _rs
+
+FramePair = tuple[np.ndarray, np.ndarray]
+"""(depth uint16 HxW in depth units, color uint8 HxWx3 RGB)."""
+
+
+@dataclass
+class SoftwareD435Spec:
+    """What the emulated camera reports: per-stream intrinsics, depth->color extrinsics, depth scale."""
+
+    color_intrinsics: Intrinsics = field(default_factory=d435_color_intrinsics)
+    depth_intrinsics: Intrinsics = field(default_factory=d435_depth_intrinsics)
+    T_color_depth: np.ndarray = field(default_factory=d435_T_color_depth)
+    depth_scale: float = D435_DEPTH_SCALE
+    fps: int = 30
+    serial: str = "000000000000"
+    name: str = "Intel RealSense D435 (software)"
+
+
+def _rs_intrinsics(rs: Any, intr: Intrinsics) -> Any:
+    out = rs.intrinsics()
+    out.width, out.height = intr.width, intr.height
+    out.fx, out.fy, out.ppx, out.ppy = intr.fx, intr.fy, intr.cx, intr.cy
+    out.model = rs.distortion.none
+    out.coeffs = [0.0] * 5
+    return out
+
+
+class SoftwareD435:
+    """An emulated D435: give ``device`` to ``RealSenseCamera(device=...)``; ``push`` injects a frame pair."""
+
+    def __init__(self, spec: SoftwareD435Spec | None = None):
+        rs = _rs()
+        self.spec = spec or SoftwareD435Spec()
+        s = self.spec
+        self._lock = threading.Lock()
+        self._frame_number = 0
+        dev = rs.software_device()
+        dev.register_info(rs.camera_info.name, s.name)
+        dev.register_info(rs.camera_info.serial_number, s.serial)
+        dev.register_info(rs.camera_info.product_line, "D400")
+        self._depth_sensor = dev.add_sensor("Stereo Module")
+        self._color_sensor = dev.add_sensor("RGB Camera")
+        self._depth_profile = self._add_stream(rs, self._depth_sensor, rs.stream.depth, rs.format.z16, 2,
+                                               s.depth_intrinsics, uid=1)
+        self._color_profile = self._add_stream(rs, self._color_sensor, rs.stream.color, rs.format.rgb8, 3,
+                                               s.color_intrinsics, uid=2)
+        self._depth_sensor.add_read_only_option(rs.option.depth_units, float(s.depth_scale))
+        ext = rs.extrinsics()
+        T = np.asarray(s.T_color_depth, dtype=np.float64)
+        ext.rotation = [float(v) for v in T[:3, :3].T.reshape(-1)]  # librealsense stores it column-major
+        ext.translation = [float(v) for v in T[:3, 3]]
+        self._depth_profile.register_extrinsics_to(self._color_profile, ext)
+        dev.create_matcher(rs.matchers.dlr_c)  # pair depth and color by frame number, like a D400
+        self.device = dev
+
+    def _add_stream(self, rs: Any, sensor: Any, kind: Any, fmt: Any, bpp: int, intr: Intrinsics,
+                    uid: int) -> Any:
+        vs = rs.video_stream()
+        vs.type, vs.fmt, vs.bpp = kind, fmt, bpp
+        vs.width, vs.height, vs.fps = intr.width, intr.height, self.spec.fps
+        vs.index, vs.uid = 0, uid
+        vs.intrinsics = _rs_intrinsics(rs, intr)
+        return sensor.add_video_stream(vs, True)
+
+    def push(self, depth: np.ndarray, color: np.ndarray) -> int:
+        """Inject one depth/color pair (same frame number and timestamp); returns the frame number."""
+        rs = _rs()
+        di, ci = self.spec.depth_intrinsics, self.spec.color_intrinsics
+        depth = np.ascontiguousarray(depth)
+        color = np.ascontiguousarray(color)
+        if depth.dtype != np.uint16 or depth.shape != (di.height, di.width):
+            raise BadFrameError("injected depth must be uint16 of the depth stream's size",
+                                detail={"shape": list(depth.shape), "dtype": str(depth.dtype)})
+        if color.dtype != np.uint8 or color.shape != (ci.height, ci.width, 3):
+            raise BadFrameError("injected color must be uint8 HxWx3 of the color stream's size",
+                                detail={"shape": list(color.shape), "dtype": str(color.dtype)})
+        with self._lock:
+            self._frame_number += 1  # starts at 1: see the module notes
+            n = self._frame_number
+            stamp_ms = n * 1000.0 / self.spec.fps
+            for sensor, profile, pixels, bpp in ((self._depth_sensor, self._depth_profile, depth, 2),
+                                                 (self._color_sensor, self._color_profile, color, 3)):
+                f = rs.software_video_frame()
+                f.pixels = pixels
+                f.stride = pixels.shape[1] * bpp
+                f.bpp = bpp
+                f.timestamp = stamp_ms
+                f.domain = rs.timestamp_domain.hardware_clock
+                f.frame_number = n
+                f.profile = profile.as_video_stream_profile()
+                if bpp == 2:
+                    f.depth_units = float(self.spec.depth_scale)
+                sensor.on_video_frame(f)
+        return n
+
+    @contextlib.contextmanager
+    def streaming(self, source: FramePair | Callable[[int], FramePair]) -> Iterator[SoftwareD435]:
+        """Push frames at ``fps`` from a background thread while the block runs, like a live camera.
+
+        ``source`` is one fixed pair or a callable ``i -> pair`` (e.g. adding fresh noise each frame).
+        """
+        stop = threading.Event()
+        errors: list[BaseException] = []
+
+        def run() -> None:
+            i = 0
+            while not stop.is_set():
+                try:
+                    pair = source(i) if callable(source) else source
+                    self.push(*pair)
+                except BaseException as exc:  # surfaced when the block exits
+                    errors.append(exc)
+                    return
+                i += 1
+                stop.wait(1.0 / self.spec.fps)
+
+        thread = threading.Thread(target=run, name="software-d435", daemon=True)
+        thread.start()
+        try:
+            yield self
+        finally:
+            stop.set()
+            thread.join(timeout=5.0)
+        if errors:
+            raise errors[0]
+
+
+def record_db3(path: str | Path, frames: Iterable[FramePair], spec: SoftwareD435Spec | None = None,
+               timeout_ms: int = 2000) -> Path:
+    """Record injected frame pairs to a rosbag2 ``.db3`` file that ``RealSenseCamera`` can play back.
+
+    Each pair is pushed and then awaited, so every pair becomes exactly one recorded frameset.
+    """
+    rs = _rs()
+    path = Path(path)
+    if path.suffix != ".db3":
+        raise CameraError("librealsense 2.59 records only rosbag2 files: the name must end in .db3",
+                          code="bad_config", detail={"path": str(path)})
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cam = SoftwareD435(spec)
+    s = cam.spec
+    pipeline = rs.pipeline(rs.context())
+    pipeline.set_device(cam.device)
+    cfg = rs.config()
+    di, ci = s.depth_intrinsics, s.color_intrinsics
+    cfg.enable_stream(rs.stream.depth, di.width, di.height, rs.format.z16, s.fps)
+    cfg.enable_stream(rs.stream.color, ci.width, ci.height, rs.format.rgb8, s.fps)
+    cfg.enable_record_to_file(str(path))
+    pipeline.start(cfg)
+    try:
+        for depth, color in frames:
+            n = cam.push(depth, color)
+            ok, fs = pipeline.try_wait_for_frames(timeout_ms)
+            if not ok:
+                raise CaptureTimeout(f"recording frame {n} did not come through the pipeline")
+    finally:
+        pipeline.stop()
+    return path
