@@ -1,0 +1,270 @@
+"""GeoGrasp-style grasp planning for the turn step (paper II-B): frontal first, top-down as fallback.
+
+Input: an isolated object cloud with normals in ``base`` and the table plane. Output: a
+:class:`GraspPlan` with the surviving grasps (best first, each with its ranking terms and named poses)
+and the reasons the other candidates were dropped.
+
+Pipeline per variant: table-aligned box → central slice → four candidate regions → all-pairs GeoGrasp
+ranking for the y and the z regions → collision filter (table or object-below box, pad boxes, object
+points) → poses. Everything after the first masks works on a few thousand points at most, so a
+20k-point cloud plans in milliseconds.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from common.messages import Plane, PointCloud
+from services.grasp.boxes import OrientedBox
+from services.grasp.candidates import ObjectFrame, candidate_regions, object_frame
+from services.grasp.circle import estimate_object_center
+from services.grasp.collision import (
+    first_overlap,
+    hits_object,
+    pad_boxes,
+    palm_box,
+    remainder_box,
+    table_box,
+)
+from services.grasp.config import GraspPlannerConfig
+from services.grasp.errors import GraspInputError
+from services.grasp.poses import frontal_rotation, grasp_poses, top_down_rotation
+from services.grasp.ranking import RankedPair, rank_region_pair
+from services.grasp.result import GraspPlan, PlannedGrasp, Rejections
+
+MIN_POINTS = 10
+
+
+@dataclass(frozen=True)
+class PlanningInput:
+    """Validated inputs: float64 points, unit normals, an upward unit table normal and its offset."""
+
+    xyz: np.ndarray
+    normals: np.ndarray
+    up: np.ndarray
+    offset: float
+    heights: np.ndarray
+
+
+def validate_inputs(cloud_xyz: Any, normals: Any, table: Plane) -> PlanningInput:
+    """Check shapes, finiteness and normals; orient the table normal toward the object.
+
+    Raises :class:`GraspInputError` with a specific code instead of letting numpy fail (or, worse,
+    silently plan on NaNs).
+    """
+    try:
+        xyz = np.asarray(cloud_xyz, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise GraspInputError(f"cloud is not numeric: {exc}", code="bad_shape") from None
+    if xyz.ndim != 2 or xyz.shape[1] != 3:
+        raise GraspInputError("cloud must be an (N, 3) array", code="bad_shape",
+                              detail={"shape": list(xyz.shape)})
+    if len(xyz) == 0:
+        raise GraspInputError("object cloud is empty", code="empty_cloud")
+    if len(xyz) < MIN_POINTS:
+        raise GraspInputError(f"object cloud has {len(xyz)} points, at least {MIN_POINTS} needed",
+                              code="empty_cloud", detail={"n": len(xyz)})
+    if normals is None:
+        raise GraspInputError("normals are required (the ranking needs them)", code="missing_normals")
+    try:
+        nrm = np.asarray(normals, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise GraspInputError(f"normals are not numeric: {exc}", code="bad_shape") from None
+    if nrm.shape != xyz.shape:
+        raise GraspInputError("normals must have the cloud's shape", code="bad_shape",
+                              detail={"cloud": list(xyz.shape), "normals": list(nrm.shape)})
+    bad = ~np.isfinite(xyz).all(axis=1) | ~np.isfinite(nrm).all(axis=1)
+    if np.any(bad):
+        raise GraspInputError(f"{int(bad.sum())} points or normals are NaN/inf", code="non_finite",
+                              detail={"n_bad": int(bad.sum()), "first": int(np.flatnonzero(bad)[0])})
+    lengths = np.linalg.norm(nrm, axis=1)
+    if np.any(lengths < 1e-6):
+        raise GraspInputError(f"{int((lengths < 1e-6).sum())} normals have zero length", code="zero_normals")
+    nrm = nrm / lengths[:, None]
+    try:
+        up = np.asarray(table.normal, dtype=np.float64).reshape(3)
+        offset = float(table.offset)
+    except (AttributeError, TypeError, ValueError) as exc:
+        raise GraspInputError(f"table is not a plane: {exc}", code="bad_table") from None
+    norm = float(np.linalg.norm(up))
+    if not (np.isfinite(up).all() and np.isfinite(offset) and norm > 1e-9):
+        raise GraspInputError("table plane has a zero or non-finite normal/offset", code="bad_table")
+    up, offset = up / norm, offset / norm
+    heights = xyz @ up + offset
+    if np.median(heights) < 0:  # the paper's sign fix: the normal must point toward the object
+        up, offset, heights = -up, -offset, -heights
+    return PlanningInput(xyz, nrm, up, offset, heights)
+
+
+def plan_grasps(cloud_xyz: Any, normals: Any, table: Plane,
+                config: GraspPlannerConfig | None = None) -> GraspPlan:
+    """Plan grasps on an isolated object cloud (``base`` frame) standing on ``table``.
+
+    ``config.mode``: 'auto' runs frontal and falls back to top-down when frontal yields nothing;
+    'frontal', 'top_down' or 'both' run what they say. Returns a :class:`GraspPlan` (never raises for a
+    well-formed cloud that merely has no grasp: the plan's ``rejections`` say why).
+    """
+    cfg = config or GraspPlannerConfig()
+    t0 = time.perf_counter()
+    inp = validate_inputs(cloud_xyz, normals, table)
+    frame = object_frame(inp.xyz, inp.up)
+    rng = np.random.default_rng(cfg.seed)
+    center_local, n_slices = estimate_object_center(frame.local, frame.extents, cfg.slice_thickness,
+                                                    cfg.center_slices, cfg.center_min_points, rng)
+    center = frame.to_base(center_local[None, :])[0]
+    t1 = time.perf_counter()
+    rejections = Rejections(max_examples=cfg.max_examples)
+    grasps: list[PlannedGrasp] = []
+    attempted: list[str] = []
+    timings = {"prepare": (t1 - t0) * 1e3}
+    if cfg.mode in ("auto", "frontal", "both"):
+        attempted.append("frontal")
+        ts = time.perf_counter()
+        grasps += _plan_frontal(inp, frame, center, cfg, rejections)
+        timings["frontal"] = (time.perf_counter() - ts) * 1e3
+    if cfg.mode in ("top_down", "both") or (cfg.mode == "auto" and not grasps):
+        attempted.append("top_down")
+        ts = time.perf_counter()
+        grasps += _plan_top_down(inp, frame, center, cfg, rejections)
+        timings["top_down"] = (time.perf_counter() - ts) * 1e3
+    timings["total"] = (time.perf_counter() - t0) * 1e3
+    return GraspPlan(grasps=grasps, rejections=rejections, attempted=attempted, object_center=center,
+                     center_slices=n_slices, main_axis=frame.main_axis.copy(), timings_ms=timings)
+
+
+def plan_grasps_for_cloud(cloud: PointCloud, table: Plane, config: GraspPlannerConfig | None = None
+                          ) -> GraspPlan:
+    """Same as :func:`plan_grasps` for a wire ``PointCloud`` (which must carry normals, frame base)."""
+    if cloud.frame != table.frame:
+        raise GraspInputError(f"cloud is in {cloud.frame!r} but the table in {table.frame!r}",
+                              code="frame_mismatch")
+    return plan_grasps(cloud.xyz, cloud.normals, table, config)
+
+
+# --------------------------------------------------------------------------------------- variants
+
+def _plan_frontal(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, cfg: GraspPlannerConfig,
+                  rej: Rejections) -> list[PlannedGrasp]:
+    g = cfg.gripper
+    top = float(inp.heights.max())
+    needed = 0.5 * (g.palm_height if cfg.check_palm else g.pad_width) + cfg.table_clearance
+    if top < needed:
+        rej.add("too_short_for_frontal", example={
+            "kind": "frontal", "object_height": top, "needed": needed,
+            "why": "a horizontal hand at the object's top would still reach into the table"})
+        return []
+    table = table_box(inp.xyz, inp.up, inp.offset, cfg.table_box_size, cfg.table_box_height)
+    out = []
+    for pair, axis in _ranked_pairs(inp.xyz, inp.normals, inp.up, frame, cfg, "frontal", rej):
+        p1, p2 = inp.xyz[pair.i], inp.xyz[pair.j]
+        R, swapped = frontal_rotation(p1, p2, inp.up, np.asarray(cfg.approach_origin, float))
+        p_plus, p_minus = (p2, p1) if swapped else (p1, p2)
+        mid = 0.5 * (p1 + p2)
+        tcp = mid + cfg.grasp_depth * R[:, 0]
+        boxes = dict(zip(("pad_plus", "pad_minus"), pad_boxes(R, p_plus, p_minus, cfg), strict=True))
+        if cfg.check_palm:
+            boxes["palm"] = palm_box(R, tcp, cfg)
+        hit = first_overlap(boxes, table, cfg.table_clearance)
+        example = {"kind": "frontal", "axis": axis, "rank": pair.rank, "contacts": [p_plus, p_minus]}
+        if hit:
+            rej.add("collides_with_table", example={**example, "box": hit})
+            continue
+        n_hit, which = _object_hits(boxes, inp.xyz, cfg)
+        if n_hit:
+            rej.add("collides_with_object", example={**example, "box": which, "points": n_hit})
+            continue
+        nrm = inp.normals[[pair.j, pair.i]] if swapped else inp.normals[[pair.i, pair.j]]
+        out.append(_make_grasp("frontal", axis, pair, R, np.array([p_plus, p_minus]), nrm, inp,
+                               cfg.grasp_depth, cfg.frontal_offsets_deg, center, cfg))
+    out.sort(key=lambda gr: -gr.rank)
+    return out
+
+
+def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, cfg: GraspPlannerConfig,
+                   rej: Rejections) -> list[PlannedGrasp]:
+    top = float(inp.heights.max())
+    crop_bottom = top - cfg.top_down_crop_height
+    keep = np.flatnonzero(inp.heights >= crop_bottom)
+    if len(keep) < MIN_POINTS:
+        rej.add("too_few_points", example={"kind": "top_down", "points_in_crop": len(keep)})
+        return []
+    xyz, nrm = inp.xyz[keep], inp.normals[keep]
+    crop_frame = object_frame(xyz, inp.up)
+    below = remainder_box(inp.heights, crop_bottom, inp.up, inp.offset, frame.box)
+    out = []
+    for pair, axis in _ranked_pairs(xyz, nrm, inp.up, crop_frame, cfg, "top_down", rej):
+        p1, p2 = xyz[pair.i], xyz[pair.j]
+        R, swapped = top_down_rotation(p1, p2, inp.up, np.asarray(cfg.approach_origin, float))
+        p_plus, p_minus = (p2, p1) if swapped else (p1, p2)
+        boxes = dict(zip(("pad_plus", "pad_minus"), pad_boxes(R, p_plus, p_minus, cfg), strict=True))
+        example = {"kind": "top_down", "axis": axis, "rank": pair.rank, "contacts": [p_plus, p_minus]}
+        hit = first_overlap(boxes, below, cfg.table_clearance) if below is not None else None
+        if hit:
+            rej.add("collides_with_table", example={**example, "box": hit, "table": "object_below_crop"})
+            continue
+        n_hit, which = _object_hits(boxes, inp.xyz, cfg)
+        if n_hit:
+            rej.add("collides_with_object", example={**example, "box": which, "points": n_hit})
+            continue
+        mid_height = float(0.5 * (p1 + p2) @ inp.up + inp.offset)
+        depth = float(np.clip(mid_height - cfg.table_clearance, 0.0, cfg.grasp_depth))
+        n_pair = nrm[[pair.j, pair.i]] if swapped else nrm[[pair.i, pair.j]]
+        out.append(_make_grasp("top_down", axis, pair, R, np.array([p_plus, p_minus]), n_pair, inp,
+                               depth, cfg.top_down_offsets_deg, center, cfg))
+    out.sort(key=lambda gr: -gr.rank)
+    return out
+
+
+# --------------------------------------------------------------------------------------- helpers
+
+def _ranked_pairs(xyz: np.ndarray, normals: np.ndarray, up: np.ndarray, frame: ObjectFrame,
+                  cfg: GraspPlannerConfig, kind: str, rej: Rejections) -> list[tuple[RankedPair, str]]:
+    """The best valid pairs of the y and the z regions; pair-level rejections go to ``rej``."""
+    regions, n_slice = candidate_regions(frame, cfg.gripper.pad_width, cfg.slice_thickness,
+                                         cfg.region_voxel, cfg.curvature_radius)
+    if not regions:
+        rej.add("too_few_points", example={"kind": kind, "slice_points": n_slice})
+        return []
+    by_axis: dict[str, list] = {}
+    for r in regions:
+        by_axis.setdefault(r.axis, []).append(r)
+    out = []
+    for axis, (a, b) in by_axis.items():
+        if min(len(a.indices), len(b.indices)) < cfg.min_region_points or a.seed_index == b.seed_index:
+            rej.add("too_few_points", example={"kind": kind, "axis": axis,
+                                               "region_points": [len(a.indices), len(b.indices)]})
+            continue
+        ranking = rank_region_pair(a, b, xyz, normals, frame.main_axis, up, cfg, cfg.candidates_per_axis)
+        for reason, count in ranking.rejected_counts.items():
+            ex = ranking.rejected_best[reason]
+            rej.add(reason, count, {"kind": kind, "axis": axis, "pairs": count,
+                                    "best_contacts": [xyz[ex.i], xyz[ex.j]], **ex.metrics})
+        out += [(p, axis) for p in ranking.best]
+    return out
+
+
+def _object_hits(boxes: dict[str, OrientedBox], xyz: np.ndarray, cfg: GraspPlannerConfig
+                 ) -> tuple[int, str | None]:
+    """Pads only: the palm sits behind the fingertips, and the paper's 0.05 m push assumes the fingers
+    retract as they open, so a palm box would reject grasps that work."""
+    for name in ("pad_plus", "pad_minus"):
+        n = hits_object(boxes[name], xyz, cfg.object_collision_min_points)
+        if n:
+            return n, name
+    return 0, None
+
+
+def _make_grasp(kind: str, axis: str, pair: RankedPair, R: np.ndarray, contacts: np.ndarray,
+                contact_normals: np.ndarray, inp: PlanningInput, depth: float, offsets: tuple[float, ...],
+                center: np.ndarray, cfg: GraspPlannerConfig) -> PlannedGrasp:
+    """A surviving grasp with its poses; ``contacts`` = (p_plus, p_minus), y running minus → plus."""
+    mid = 0.5 * (contacts[0] + contacts[1])
+    poses = grasp_poses(R, mid, depth, cfg.pregrasp_back_off, offsets, inp.up, center, cfg.turn_deg)
+    metrics = {**pair.metrics, "depth": depth, "contact_height": float(mid @ inp.up + inp.offset)}
+    return PlannedGrasp(kind=kind, axis=axis, contacts=np.asarray(contacts, float),
+                        contact_normals=np.asarray(contact_normals, float), width=pair.metrics["width"],
+                        rank=pair.rank, metrics=metrics, poses=poses)
