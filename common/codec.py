@@ -14,14 +14,17 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import struct
 import types
 import typing
+from collections.abc import Callable
 from typing import Any, ClassVar, TypeVar
 
 import msgpack
 import numpy as np
 
 from common.errors import WireError
+from common.msgpack_view import unpack_view
 
 MAX_PAYLOAD_BYTES = 512 * 1024 * 1024
 """Largest message accepted. A 1M-point colored cloud with normals is ~27 MB; a 1280x720 RGB-D ~4.6 MB."""
@@ -79,47 +82,88 @@ def registered_types() -> dict[str, type[Message]]:
 
 # ----------------------------------------------------------------------------------------------- encode
 
-def _pack_value(value: Any) -> Any:
+_PACK = msgpack.Packer(use_bin_type=True, autoreset=True)
+
+
+def _bin_header(n: int) -> bytes:
+    """msgpack ``bin`` header for ``n`` bytes (bin 8/16/32 as the spec says)."""
+    if n < 1 << 8:
+        return struct.pack(">BB", 0xC4, n)
+    if n < 1 << 16:
+        return struct.pack(">BH", 0xC5, n)
+    return struct.pack(">BI", 0xC6, n)
+
+
+def _emit(value: Any, out: list[Any]) -> None:
+    """Append the msgpack encoding of ``value`` to ``out`` as chunks.
+
+    Array data is appended as a memoryview of the array itself, so the only copy of a large buffer is the
+    final ``b"".join``. The result is standard msgpack that any decoder reads.
+    """
     if isinstance(value, Message):
-        return _to_wire(value)
-    if isinstance(value, np.ndarray):
-        arr = value.astype(value.dtype.newbyteorder("<"), copy=False)
-        arr = np.ascontiguousarray(arr)
-        return {"nd": arr.dtype.str, "s": list(arr.shape), "b": memoryview(arr).cast("B") if arr.size else b""}
-    if isinstance(value, (list, tuple)):
-        return [_pack_value(v) for v in value]
-    if isinstance(value, dict):
-        return {k: _pack_value(v) for k, v in value.items()}
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
-
-
-def _to_wire(msg: Message) -> dict[str, Any]:
-    out: dict[str, Any] = {"type": type(msg).__name__, "v": type(msg).VERSION}
-    for f in dataclasses.fields(msg):  # type: ignore[arg-type]
-        out[f.name] = _pack_value(getattr(msg, f.name))
-    return out
+        fields = dataclasses.fields(value)  # type: ignore[arg-type]
+        out.append(_PACK.pack_map_header(len(fields) + 2))
+        out.append(_PACK.pack("type"))
+        out.append(_PACK.pack(type(value).__name__))
+        out.append(_PACK.pack("v"))
+        out.append(_PACK.pack(type(value).VERSION))
+        for f in fields:
+            out.append(_PACK.pack(f.name))
+            _emit(getattr(value, f.name), out)
+    elif isinstance(value, np.ndarray):
+        arr = np.ascontiguousarray(value.astype(value.dtype.newbyteorder("<"), copy=False))
+        out.append(_PACK.pack_map_header(3))
+        out.append(_PACK.pack("nd"))
+        out.append(_PACK.pack(arr.dtype.str))
+        out.append(_PACK.pack("s"))
+        out.append(_PACK.pack(list(arr.shape)))
+        out.append(_PACK.pack("b"))
+        out.append(_bin_header(arr.nbytes))
+        if arr.nbytes:
+            out.append(memoryview(arr).cast("B"))
+    elif isinstance(value, dict):
+        out.append(_PACK.pack_map_header(len(value)))
+        for k, v in value.items():
+            out.append(_PACK.pack(k))
+            _emit(v, out)
+    elif isinstance(value, (list, tuple)):
+        out.append(_PACK.pack_array_header(len(value)))
+        for v in value:
+            _emit(v, out)
+    elif isinstance(value, np.generic):
+        out.append(_PACK.pack(value.item()))
+    else:
+        out.append(_PACK.pack(value))
 
 
 def encode(msg: Message) -> bytes:
-    """Serialise a message to msgpack bytes."""
-    return msgpack.packb(_to_wire(msg), use_bin_type=True)
+    """Serialise a message to msgpack bytes (large arrays are copied exactly once)."""
+    chunks: list[Any] = []
+    _emit(msg, chunks)
+    return b"".join(chunks)
+
+
+def _to_wire(msg: Message) -> dict[str, Any]:
+    """The message as plain msgpack-able Python objects (for tests and tools that want the map)."""
+    return msgpack.unpackb(encode(msg), raw=False)
 
 
 # ----------------------------------------------------------------------------------------------- decode
 
 def decode(payload: bytes | bytearray | memoryview) -> Message:
-    """Parse and validate msgpack bytes into the message class named by its ``type``."""
+    """Parse and validate msgpack bytes into the message class named by its ``type``.
+
+    Arrays share ``payload``'s memory (read-only views): no copy of the bulk data.
+    """
     if payload is None or len(payload) == 0:
         raise WireError("empty payload", code="malformed")
     if len(payload) > MAX_PAYLOAD_BYTES:
         raise WireError("payload too large", code="oversize",
                         detail={"bytes": len(payload), "max": MAX_PAYLOAD_BYTES})
     try:
-        raw = msgpack.unpackb(payload, raw=False, strict_map_key=True)
-    except Exception as exc:  # msgpack raises several unrelated types for bad input
-        raise WireError(f"not valid msgpack: {type(exc).__name__}", code="malformed") from None
+        raw = unpack_view(payload)
+    except (ValueError, TypeError, struct.error) as exc:
+        raise WireError(f"not valid msgpack: {exc}", code="malformed") from None
     return _from_wire(raw, path="")
 
 
@@ -137,17 +181,14 @@ def _from_wire(raw: Any, path: str, expected: type[Message] | None = None) -> Me
     if version != cls.VERSION:
         raise WireError(f"{type_name} schema version {version!r} is not supported (expected {cls.VERSION})",
                         code="unsupported_version", detail={"path": path or "/"})
-    hints = _hints(cls)
     kwargs: dict[str, Any] = {}
-    for f in dataclasses.fields(cls):  # type: ignore[arg-type]
-        fpath = f"{path}/{f.name}"
-        if f.name not in raw:
-            has_default = (f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING)
-            if has_default:
-                continue
-            raise WireError(f"missing field {f.name!r} in {type_name}", code="missing_field",
-                            detail={"path": fpath})
-        kwargs[f.name] = _decode_value(raw[f.name], hints[f.name], f.metadata.get("array"), fpath)
+    for name, decoder, required in _plan(cls):
+        if name not in raw:
+            if required:
+                raise WireError(f"missing field {name!r} in {type_name}", code="missing_field",
+                                detail={"path": f"{path}/{name}"})
+            continue
+        kwargs[name] = decoder(raw[name], f"{path}/{name}")
     msg = cls(**kwargs)
     check = getattr(msg, "validate", None)
     if check is not None:
@@ -155,13 +196,21 @@ def _from_wire(raw: Any, path: str, expected: type[Message] | None = None) -> Me
     return msg
 
 
-_HINT_CACHE: dict[type, dict[str, Any]] = {}
+Decoder = Callable[[Any, str], Any]
+_PLANS: dict[type, list[tuple[str, Decoder, bool]]] = {}
 
 
-def _hints(cls: type) -> dict[str, Any]:
-    if cls not in _HINT_CACHE:
-        _HINT_CACHE[cls] = typing.get_type_hints(cls)
-    return _HINT_CACHE[cls]
+def _plan(cls: type[Message]) -> list[tuple[str, Decoder, bool]]:
+    """Per-class list of (field, decoder, required), built once from the type hints."""
+    plan = _PLANS.get(cls)
+    if plan is None:
+        hints = typing.get_type_hints(cls)
+        plan = []
+        for f in dataclasses.fields(cls):  # type: ignore[arg-type]
+            required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+            plan.append((f.name, _decoder_for(hints[f.name], f.metadata.get("array")), required))
+        _PLANS[cls] = plan
+    return plan
 
 
 def _is_optional(tp: Any) -> tuple[bool, Any]:
@@ -177,47 +226,81 @@ def _bad(kind: str, msg: str, path: str, **detail: Any) -> WireError:
     return WireError(msg, code=kind, detail={"path": path, **detail})
 
 
-def _decode_value(value: Any, tp: Any, spec: ArraySpec | None, path: str) -> Any:
+def _decoder_for(tp: Any, spec: ArraySpec | None) -> Decoder:
+    """A function that validates and converts one wire value of type ``tp``."""
     optional, tp = _is_optional(tp)
-    if value is None:
-        if optional:
-            return None
-        raise _bad("missing_field", "field must not be null", path)
+    inner = _inner_decoder(tp, spec)
+
+    def decode_value(value: Any, path: str) -> Any:
+        if value is None:
+            if optional:
+                return None
+            raise _bad("missing_field", "field must not be null", path)
+        return inner(value, path)
+
+    return decode_value
+
+
+def _inner_decoder(tp: Any, spec: ArraySpec | None) -> Decoder:
     if spec is not None:
-        return _decode_array(value, spec, path)
+        return lambda v, p: _decode_array(v, spec, p)
     origin = typing.get_origin(tp)
     if isinstance(tp, type) and issubclass(tp, Message):
-        return _from_wire(value, path, expected=tp)
+        return lambda v, p: _from_wire(v, p, expected=tp)
     if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise _bad("bad_type", "expected a number", path)
-        if not math.isfinite(value):
-            raise _bad("non_finite", "number must be finite", path)
-        return float(value)
+        return _decode_float
     if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise _bad("bad_type", "expected an integer", path)
-        return value
+        return _decode_int
     if tp is bool:
-        if not isinstance(value, bool):
-            raise _bad("bad_type", "expected a boolean", path)
-        return value
+        return _decode_bool
     if tp is str:
-        if not isinstance(value, str):
-            raise _bad("bad_type", "expected a string", path)
-        return value
+        return _decode_str
     if origin is list:
-        if not isinstance(value, list):
-            raise _bad("bad_type", "expected a list", path)
         (item_tp,) = typing.get_args(tp) or (Any,)
-        return [_decode_value(v, item_tp, None, f"{path}[{i}]") for i, v in enumerate(value)]
+        item = _decoder_for(item_tp, None)
+
+        def decode_list(v: Any, p: str) -> list[Any]:
+            if not isinstance(v, list):
+                raise _bad("bad_type", "expected a list", p)
+            return [item(x, f"{p}[{i}]") for i, x in enumerate(v)]
+
+        return decode_list
     if tp is dict or origin is dict:
-        if not isinstance(value, dict):
-            raise _bad("bad_type", "expected a map", path)
-        return _decode_free(value, path)
+        def decode_map(v: Any, p: str) -> Any:
+            if not isinstance(v, dict):
+                raise _bad("bad_type", "expected a map", p)
+            return _decode_free(v, p)
+
+        return decode_map
     if tp is Any:
-        return _decode_free(value, path)
-    raise _bad("bad_type", f"unsupported field type {tp!r}", path)
+        return _decode_free
+    raise TypeError(f"unsupported wire field type {tp!r}")
+
+
+def _decode_float(value: Any, path: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise _bad("bad_type", "expected a number", path)
+    if not math.isfinite(value):
+        raise _bad("non_finite", "number must be finite", path)
+    return float(value)
+
+
+def _decode_int(value: Any, path: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise _bad("bad_type", "expected an integer", path)
+    return value
+
+
+def _decode_bool(value: Any, path: str) -> bool:
+    if not isinstance(value, bool):
+        raise _bad("bad_type", "expected a boolean", path)
+    return value
+
+
+def _decode_str(value: Any, path: str) -> str:
+    if not isinstance(value, str):
+        raise _bad("bad_type", "expected a string", path)
+    return value
 
 
 def _decode_free(value: Any, path: str) -> Any:
@@ -230,6 +313,8 @@ def _decode_free(value: Any, path: str) -> Any:
         return {k: _decode_free(v, f"{path}/{k}") for k, v in value.items()}
     if isinstance(value, list):
         return [_decode_free(v, f"{path}[{i}]") for i, v in enumerate(value)]
+    if isinstance(value, memoryview):
+        return value.tobytes()
     return value
 
 
@@ -237,7 +322,7 @@ def _decode_array(value: Any, spec: ArraySpec | None, path: str) -> np.ndarray:
     if not isinstance(value, dict) or set(value) != {"nd", "s", "b"}:
         raise _bad("bad_type", "expected an array map {nd, s, b}", path)
     dtype_str, shape, data = value["nd"], value["s"], value["b"]
-    if not isinstance(dtype_str, str) or not isinstance(shape, list) or not isinstance(data, bytes):
+    if not isinstance(dtype_str, str) or not isinstance(shape, list) or not isinstance(data, (bytes, memoryview)):
         raise _bad("bad_type", "array map has wrong member types", path)
     try:
         dtype = np.dtype(dtype_str)
@@ -248,7 +333,7 @@ def _decode_array(value: Any, spec: ArraySpec | None, path: str) -> np.ndarray:
     if spec is not None and dtype.str != spec.dtype:
         raise _bad("bad_dtype", f"expected dtype {spec.dtype}, got {dtype.str}", path,
                    expected=spec.dtype, got=dtype.str)
-    if len(shape) > 8 or not all(isinstance(d, int) and not isinstance(d, bool) and 0 <= d for d in shape):
+    if len(shape) > 8 or not all(isinstance(d, int) and not isinstance(d, bool) and d >= 0 for d in shape):
         raise _bad("bad_shape", "shape must be a short list of non-negative integers", path, shape=shape)
     count = math.prod(shape)
     if count * dtype.itemsize != len(data):

@@ -36,6 +36,7 @@ from common.client import DEFAULT_TIMEOUT_S, request
 from common.codec import Message, decode
 from common.errors import ObjscanError, WireError
 from common.log import event, request_id, setup_logging
+from common.memory import tune_malloc
 from common.messages import Error, Health
 from common.zenoh_config import ZenohSettings
 
@@ -308,6 +309,7 @@ def settings_from_args(args: argparse.Namespace, **options: Any) -> ServiceSetti
 
 def run_service(factory: Callable[[], Service]) -> None:
     """Run a service until SIGINT/SIGTERM; exits non-zero if it failed to start."""
+    tune_malloc()
     service = factory()
     setup_logging(service.name, service.instance)
 

@@ -1,0 +1,37 @@
+"""``objscan bench NAME [--json PATH]``: run a benchmark from ``bench/``, print a table, write JSON."""
+
+from __future__ import annotations
+
+import importlib
+import json
+import pkgutil
+from pathlib import Path
+
+import bench
+from bench.report import print_figures
+
+
+def available() -> list[str]:
+    return sorted(m.name for m in pkgutil.iter_modules(bench.__path__) if not m.name.startswith("_")
+                  and m.name not in ("report", "common"))
+
+
+def register(sub) -> None:  # noqa: ANN001
+    p = sub.add_parser("bench", help="run a benchmark and print its figures",
+                       description=f"Benchmarks: {', '.join(available())}. Figures are measured against "
+                                   "baselines in the same run; see BENCHMARKS.md.")
+    p.add_argument("name", choices=available())
+    p.add_argument("--json", help="write the figures as one JSON object to this path")
+    p.add_argument("--quick", action="store_true", help="a smaller run for a fast check")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:  # noqa: ANN001
+    module = importlib.import_module(f"bench.{args.name}")
+    figures = module.run(quick=args.quick)
+    print_figures(args.name, figures)
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(figures, indent=2, default=float))
+        print(f"wrote {args.json}")
+    return 0

@@ -1,0 +1,50 @@
+"""``objscan up``: start the router and every service as its own process; Ctrl-C stops them all."""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+from pathlib import Path
+
+from common.launcher import ServiceGroup
+from common.zenoh_config import DEFAULT_ROUTER_PORT
+from services.cli.cells import SERVICE_MODULES, cell_specs
+
+
+def register(sub) -> None:  # noqa: ANN001
+    p = sub.add_parser("up", help="start every service (sim backends by default) and keep them running",
+                       description="Start a Zenoh router on loopback and every objscan service as its own "
+                                   "process. Ctrl-C (or SIGTERM) stops them all cleanly.")
+    p.add_argument("--backend", choices=["sim", "real", "replay"], default="sim",
+                   help="hardware backends for camera and arm (default: %(default)s)")
+    p.add_argument("--port", type=int, default=DEFAULT_ROUTER_PORT, help="router port (default: %(default)s)")
+    p.add_argument("--only", help=f"comma-separated subset of: {', '.join(SERVICE_MODULES)}")
+    p.add_argument("--log-dir", default="logs", help="one log file per process (default: %(default)s)")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:  # noqa: ANN001
+    names = [n for n in args.only.split(",") if n] if args.only else None
+    unknown = set(names or []) - set(SERVICE_MODULES)
+    if unknown:
+        print(f"unknown services: {', '.join(sorted(unknown))}")
+        return 2
+    backend = {"real": "real", "sim": "sim", "replay": "replay"}[args.backend]
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    with ServiceGroup(args.port, log_dir=Path(args.log_dir)) as group:
+        specs = cell_specs(names, backend=backend)
+        print(f"starting router on {group.endpoint} and {len(specs)} services (logs in {args.log_dir}/)")
+        group.launch(specs)
+        print("all services live; Ctrl-C to stop. 'objscan status' lists them.")
+        while not stop.is_set():
+            for label, proc in group.procs.items():
+                if proc.poll() is not None:
+                    print(f"{label} exited with code {proc.returncode}; stopping the cell")
+                    stop.set()
+            time.sleep(0.5)
+        print("stopping...")
+    print("stopped.")
+    return 0
