@@ -51,7 +51,8 @@ def rgbd_frames(draw):  # noqa: ANN001, ANN201
                      intrinsics=Intrinsics(width=w, height=h, fx=draw(st.floats(1, 2000)), fy=500.0, cx=1.0, cy=2.0),
                      T_base_camera=make_transform(rotation_about_axis([0, 0, 1], draw(st.floats(-3, 3))), [1, 2, 3]),
                      stamp=draw(st.floats(0, 1e9)), seq=draw(st.integers(0, 2**31)),
-                     T_base_camera_true=draw(st.none() | st.just(np.eye(4))), meta=draw(st.dictionaries(small_text, json_like, max_size=3)))
+                     T_base_camera_true=draw(st.none() | st.just(np.eye(4))),
+                     meta=draw(st.dictionaries(small_text, json_like, max_size=3)))
 
 
 @st.composite
@@ -80,7 +81,8 @@ STRATEGIES = {
                        width=st.floats(0, 0.2), rank=finite, metrics=st.dictionaries(small_text, finite, max_size=4),
                        poses=st.dictionaries(small_text, st.builds(Pose, position=arrays(np.float64, (3,)),
                                                                    orientation=unit_quats), max_size=3)),
-    "Error": st.builds(Error, code=small_text, message=small_text, detail=st.dictionaries(small_text, json_like, max_size=3)),
+    "Error": st.builds(Error, code=small_text, message=small_text,
+                       detail=st.dictionaries(small_text, json_like, max_size=3)),
     "Ok": st.builds(Ok, info=st.dictionaries(small_text, json_like, max_size=3)),
     "Health": st.builds(Health, service=small_text, instance=small_text, busy=st.integers(0, 100),
                         uptime_s=st.floats(0, 1e6)),
