@@ -67,9 +67,12 @@ def float32_value(x: float) -> float:
 
 
 def intrinsics_from_rs(intr: Any) -> Intrinsics:
-    """Our pinhole ``Intrinsics`` from an ``rs.intrinsics`` (distortion goes to frame meta)."""
-    return Intrinsics(width=int(intr.width), height=int(intr.height), fx=float(intr.fx), fy=float(intr.fy),
-                      cx=float(intr.ppx), cy=float(intr.ppy))
+    """Our pinhole ``Intrinsics`` from an ``rs.intrinsics`` (distortion goes to frame meta).
+
+    librealsense stores them as float32; the decimal value is recovered so 615.0 stays 615.0.
+    """
+    return Intrinsics(width=int(intr.width), height=int(intr.height), fx=float32_value(intr.fx),
+                      fy=float32_value(intr.fy), cx=float32_value(intr.ppx), cy=float32_value(intr.ppy))
 
 
 class RealSenseCamera(Camera):
