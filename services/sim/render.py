@@ -1,0 +1,294 @@
+"""CPU RGB-D rendering of the twin with Open3D's ``RaycastingScene``.
+
+One ray per pixel through the pixel centre ``(u, v)`` of a pinhole camera (the same convention a
+registration back-projects with: ``x = (u - cx) / fx * z``). Ray directions have z = 1 in the camera
+frame, so the hit distance *is* the z-depth. At each hit the surface colour is the object's texture
+sampled through the triangle's UVs (barycentrics from ``primitive_uvs``) or the table's procedural wood
+texture, shaded with a fixed room light (Lambert + ambient), then the D435 model degrades the images.
+
+The ``RaycastingScene`` (its BVH) is built once per world state in ``RenderScene`` and reused for every
+frame until the object moves.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+import open3d as o3d
+from numba import njit
+from scipy.ndimage import gaussian_filter
+
+from common.messages import Intrinsics
+from services.sim.catalogue import DEFAULT_COLOR, SimObject
+from services.sim.errors import SimInputError, check_transform
+from services.sim.sensor_model import D435Noise, apply_d435_noise
+
+LABEL_NONE = 0
+LABEL_TABLE = 1
+LABEL_OBJECT = 2
+#: Colour of pixels whose ray hits nothing (the far room): dark grey, no depth.
+BACKGROUND_RGB = np.array([55, 58, 62], dtype=np.uint8)
+
+
+@dataclass(frozen=True)
+class TableSpec:
+    """The table: a box whose top is the plane z = 0 of ``base`` (docs/conventions.md)."""
+
+    center_xy: tuple[float, float] = (0.4, 0.0)
+    size_xy: tuple[float, float] = (1.2, 1.2)
+    thickness: float = 0.04
+    texel_m: float = 0.002  # resolution of the procedural top texture
+    base_rgb: tuple[int, int, int] = (176, 146, 110)  # light wood
+    grain_contrast: float = 22.0  # 8-bit levels of the wood grain and blotches (what colour ICP locks on)
+    texture_seed: int = 7
+
+
+@dataclass(frozen=True)
+class Lighting:
+    """A fixed room light: colour = albedo * (ambient + diffuse * max(0, n . towards_light))."""
+
+    towards_light: tuple[float, float, float] = (-0.3, 0.25, 1.0)
+    ambient: float = 0.55
+    diffuse: float = 0.5
+
+
+@lru_cache(maxsize=8)
+def table_texture(spec: TableSpec) -> np.ndarray:
+    """Procedural wood-like texture of the table top, (rows along y, cols along x, 3) uint8, read-only.
+
+    Grain along x plus soft blotches at two scales: mild, but enough structure for colour ICP and for a
+    person to see the table move between frames.
+    """
+    rng = np.random.default_rng(spec.texture_seed)
+    nx = max(2, int(round(spec.size_xy[0] / spec.texel_m)))
+    ny = max(2, int(round(spec.size_xy[1] / spec.texel_m)))
+    blotch = gaussian_filter(rng.standard_normal((ny, nx)), 12.0)
+    blotch /= np.abs(blotch).max() + 1e-12
+    speck = gaussian_filter(rng.standard_normal((ny, nx)), 1.5)
+    speck /= np.abs(speck).max() + 1e-12
+    yy = np.arange(ny)[:, None] * spec.texel_m
+    xx = np.arange(nx)[None, :] * spec.texel_m
+    warp = gaussian_filter(rng.standard_normal((ny, nx)), 25.0)
+    warp /= np.abs(warp).max() + 1e-12
+    grain = np.sin(2 * np.pi * (yy / 0.011 + 0.6 * warp + 0.02 * xx / 0.05))
+    shade = spec.grain_contrast * (0.3 * grain + 0.8 * blotch + 0.4 * speck)
+    tex = np.asarray(spec.base_rgb, dtype=np.float64)[None, None, :] + shade[..., None] * np.array([1.0, 0.85, 0.7])
+    tex = np.clip(tex + 0.5, 0, 255).astype(np.uint8)
+    tex.setflags(write=False)
+    return tex
+
+
+def table_mesh(spec: TableSpec) -> o3d.geometry.TriangleMesh:
+    """The table box in ``base``: top face at z = 0."""
+    box = o3d.geometry.TriangleMesh.create_box(spec.size_xy[0], spec.size_xy[1], spec.thickness)
+    box.translate((spec.center_xy[0] - spec.size_xy[0] / 2, spec.center_xy[1] - spec.size_xy[1] / 2, -spec.thickness))
+    return box
+
+
+def table_colors(spec: TableSpec, xy: np.ndarray) -> np.ndarray:
+    """Albedo of the table at base-frame points ``xy`` (N, 2) (nearest texel; clamped at the rim)."""
+    tex = table_texture(spec)
+    col = ((xy[:, 0] - (spec.center_xy[0] - spec.size_xy[0] / 2)) / spec.texel_m).astype(np.int64)
+    row = ((xy[:, 1] - (spec.center_xy[1] - spec.size_xy[1] / 2)) / spec.texel_m).astype(np.int64)
+    return tex[np.clip(row, 0, tex.shape[0] - 1), np.clip(col, 0, tex.shape[1] - 1)]
+
+
+class RenderScene:
+    """The static geometry of one world state, with its ray-casting BVH built once.
+
+    ``obj`` stands at ``T_base_object`` (object frame -> base); the table is optional so a test can render
+    an object alone.
+    """
+
+    def __init__(self, obj: SimObject | None, T_base_object: np.ndarray | None = None, *,
+                 table: TableSpec | None = TableSpec(), lighting: Lighting = Lighting()):
+        self.obj = obj
+        self.table = table
+        self.lighting = lighting
+        self.T_base_object = check_transform(np.eye(4) if T_base_object is None else T_base_object, "T_base_object")
+        self.scene = o3d.t.geometry.RaycastingScene()
+        self.object_gid = -1
+        self.table_gid = -1
+        if obj is not None:
+            V = obj.vertices @ self.T_base_object[:3, :3].T + self.T_base_object[:3, 3]
+            gid = self.scene.add_triangles(o3d.core.Tensor(V.astype(np.float32)),
+                                           o3d.core.Tensor(obj.triangles.astype(np.uint32)))
+            self.object_gid = int(gid)
+        if table is not None:
+            gid = self.scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(table_mesh(table)))
+            self.table_gid = int(gid)
+
+
+@dataclass
+class RenderResult:
+    """One rendered frame. ``labels`` and ``depth_true`` are ground truth, for tests and evaluation."""
+
+    color: np.ndarray  # uint8 (H, W, 3)
+    depth: np.ndarray  # uint16 (H, W), metres = depth * depth_scale, 0 = no data
+    labels: np.ndarray  # uint8 (H, W): LABEL_NONE, LABEL_TABLE, LABEL_OBJECT (before dropouts)
+    depth_true: np.ndarray  # float32 (H, W) metres, exact ray-cast z-depth, 0 = no hit
+    depth_scale: float = 0.001
+    info: dict = field(default_factory=dict)
+
+
+@lru_cache(maxsize=8)
+def _camera_rays(width: int, height: int, fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
+    """Ray directions in the camera frame, (H*W, 3) float32 with z = 1, read-only."""
+    u, v = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
+    d = np.stack([(u - cx) / fx, (v - cy) / fy, np.ones_like(u)], axis=-1).reshape(-1, 3).astype(np.float32)
+    d.setflags(write=False)
+    return d
+
+
+@njit(cache=True, nogil=True)
+def _compose(t_hit, gids, prims, bary, normals, dirs, origin, obj_gid, tab_gid, mode, tri_uvs, tex, tris, vcols,
+             flat_rgb, albedo_in, table_tex, table_x0, table_y0, texel, light, ambient, diffuse, bg,
+             color_out, labels_out, depth_out):  # pragma: no cover - compiled
+    """Per-pixel shading, one pass over the ray-cast answers (numba: ~5 ms instead of ~40 ms of numpy).
+
+    mode 0: object textured (single texture, bilinear); 1: vertex colours; 2: flat; 3: albedo given.
+    Normals are flipped to face the camera (meshes are not always consistently oriented).
+    """
+    n = t_hit.shape[0]
+    th, tw = tex.shape[0], tex.shape[1]
+    rows, cols = table_tex.shape[0], table_tex.shape[1]
+    for i in range(n):
+        t = t_hit[i]
+        if not np.isfinite(t):
+            labels_out[i] = 0
+            depth_out[i] = 0.0
+            for c in range(3):
+                color_out[i, c] = bg[c]
+            continue
+        depth_out[i] = t
+        dx, dy, dz = dirs[i, 0], dirs[i, 1], dirs[i, 2]
+        nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+        if nx * dx + ny * dy + nz * dz > 0:
+            nx, ny, nz = -nx, -ny, -nz
+        lam = nx * light[0] + ny * light[1] + nz * light[2]
+        k = ambient + diffuse * (lam if lam > 0 else 0.0)
+        r = g = b = 0.0
+        gid = gids[i]
+        if gid == obj_gid:
+            labels_out[i] = 2
+            p = prims[i]
+            u = bary[i, 0]
+            v = bary[i, 1]
+            w0 = 1.0 - u - v
+            if mode == 0:
+                su = w0 * tri_uvs[p, 0, 0] + u * tri_uvs[p, 1, 0] + v * tri_uvs[p, 2, 0]
+                sv = w0 * tri_uvs[p, 0, 1] + u * tri_uvs[p, 1, 1] + v * tri_uvs[p, 2, 1]
+                su -= np.floor(su)
+                sv -= np.floor(sv)
+                x = su * tw - 0.5
+                y = (1.0 - sv) * th - 0.5
+                x0 = int(np.floor(x))
+                y0 = int(np.floor(y))
+                fx = x - x0
+                fy = y - y0
+                x0 %= tw
+                y0 %= th
+                x1 = (x0 + 1) % tw
+                y1 = (y0 + 1) % th
+                a00 = (1 - fx) * (1 - fy)
+                a01 = fx * (1 - fy)
+                a10 = (1 - fx) * fy
+                a11 = fx * fy
+                r = a00 * tex[y0, x0, 0] + a01 * tex[y0, x1, 0] + a10 * tex[y1, x0, 0] + a11 * tex[y1, x1, 0]
+                g = a00 * tex[y0, x0, 1] + a01 * tex[y0, x1, 1] + a10 * tex[y1, x0, 1] + a11 * tex[y1, x1, 1]
+                b = a00 * tex[y0, x0, 2] + a01 * tex[y0, x1, 2] + a10 * tex[y1, x0, 2] + a11 * tex[y1, x1, 2]
+            elif mode == 1:
+                i0, i1, i2 = tris[p, 0], tris[p, 1], tris[p, 2]
+                r = 255.0 * (w0 * vcols[i0, 0] + u * vcols[i1, 0] + v * vcols[i2, 0])
+                g = 255.0 * (w0 * vcols[i0, 1] + u * vcols[i1, 1] + v * vcols[i2, 1])
+                b = 255.0 * (w0 * vcols[i0, 2] + u * vcols[i1, 2] + v * vcols[i2, 2])
+            elif mode == 2:
+                r, g, b = flat_rgb[0], flat_rgb[1], flat_rgb[2]
+            else:
+                r, g, b = albedo_in[i, 0], albedo_in[i, 1], albedo_in[i, 2]
+        elif gid == tab_gid:
+            labels_out[i] = 1
+            px = origin[0] + t * dx
+            py = origin[1] + t * dy
+            col = int((px - table_x0) / texel)
+            row = int((py - table_y0) / texel)
+            col = min(max(col, 0), cols - 1)
+            row = min(max(row, 0), rows - 1)
+            r, g, b = table_tex[row, col, 0], table_tex[row, col, 1], table_tex[row, col, 2]
+        else:
+            labels_out[i] = 0
+        color_out[i, 0] = min(max(r * k + 0.5, 0.0), 255.0)
+        color_out[i, 1] = min(max(g * k + 0.5, 0.0), 255.0)
+        color_out[i, 2] = min(max(b * k + 0.5, 0.0), 255.0)
+
+
+_EMPTY_UVS = np.zeros((1, 3, 2), dtype=np.float32)
+_EMPTY_TEX = np.zeros((1, 1, 3), dtype=np.uint8)
+_EMPTY_TRIS = np.zeros((1, 3), dtype=np.int32)
+_EMPTY_VCOLS = np.zeros((1, 3), dtype=np.float32)
+_EMPTY_ALBEDO = np.zeros((1, 3), dtype=np.float32)
+
+
+def render(scene: RenderScene, T_base_camera: np.ndarray, intrinsics: Intrinsics, *,
+           noise: D435Noise | None, rng: np.random.Generator | None = None) -> RenderResult:
+    """Render colour, depth and labels of ``scene`` from a camera at ``T_base_camera`` (optical frame).
+
+    With ``noise`` the D435 model is applied (drawing from ``rng``, required then); without it the
+    depth is the exact ray-cast depth quantised to 1 mm, and the colour the shaded albedo.
+    """
+    T = check_transform(T_base_camera, "T_base_camera")
+    w, h = int(intrinsics.width), int(intrinsics.height)
+    if w <= 0 or h <= 0 or intrinsics.fx <= 0 or intrinsics.fy <= 0:
+        raise SimInputError("intrinsics must be positive", code="bad_value", detail=intrinsics.as_dict())
+    if noise is not None and rng is None:
+        raise SimInputError("a noisy render needs an rng (for reproducibility)", code="bad_value")
+    d_cam = _camera_rays(w, h, float(intrinsics.fx), float(intrinsics.fy), float(intrinsics.cx), float(intrinsics.cy))
+    R = T[:3, :3].astype(np.float32)
+    dirs = d_cam @ R.T
+    rays = np.empty((h * w, 6), dtype=np.float32)
+    rays[:, :3] = T[:3, 3].astype(np.float32)
+    rays[:, 3:] = dirs
+    ans = scene.scene.cast_rays(o3d.core.Tensor(rays))
+    t_hit = ans["t_hit"].numpy()
+    gids = ans["geometry_ids"].numpy()
+    n = h * w
+    color = np.empty((n, 3), dtype=np.uint8)
+    labels = np.empty(n, dtype=np.uint8)
+    depth_true = np.empty(n, dtype=np.float32)
+    obj = scene.obj
+    mode, tri_uvs, tex, tris, vcols, albedo = 2, _EMPTY_UVS, _EMPTY_TEX, _EMPTY_TRIS, _EMPTY_VCOLS, _EMPTY_ALBEDO
+    prims = ans["primitive_ids"].numpy()
+    bary = ans["primitive_uvs"].numpy()
+    if obj is not None:
+        if obj.appearance == "texture" and len(obj.textures) == 1:
+            mode, tri_uvs, tex = 0, obj.triangle_uvs, obj.textures[0]
+        elif obj.appearance == "vertex_colors":
+            mode, tris, vcols = 1, obj.triangles, obj.vertex_colors
+        elif obj.appearance == "texture":  # several texture images: sample them with numpy
+            sel = np.flatnonzero(np.isfinite(t_hit) & (gids == scene.object_gid))
+            albedo = np.zeros((n, 3), dtype=np.float32)
+            albedo[sel] = obj.surface_colors(prims[sel], bary[sel])
+            mode = 3
+    table = scene.table
+    table_tex = table_texture(table) if table is not None else _EMPTY_TEX
+    x0 = table.center_xy[0] - table.size_xy[0] / 2 if table is not None else 0.0
+    y0 = table.center_xy[1] - table.size_xy[1] / 2 if table is not None else 0.0
+    texel = table.texel_m if table is not None else 1.0
+    light = np.asarray(scene.lighting.towards_light, dtype=np.float64)
+    light /= np.linalg.norm(light)
+    _compose(t_hit, gids, prims, bary, ans["primitive_normals"].numpy(), dirs, T[:3, 3].astype(np.float32),
+             scene.object_gid, scene.table_gid, mode, tri_uvs, tex, tris, vcols,
+             DEFAULT_COLOR.astype(np.float64), albedo, table_tex, x0, y0, texel, light,
+             float(scene.lighting.ambient), float(scene.lighting.diffuse), BACKGROUND_RGB, color, labels, depth_true)
+    depth_true = depth_true.reshape(h, w)
+    color = color.reshape(h, w, 3)
+    labels = labels.reshape(h, w)
+    if noise is not None:
+        depth_m, color = apply_d435_noise(depth_true, color, float(intrinsics.fx), noise, rng)
+    else:
+        depth_m = depth_true
+    depth_mm = np.rint(depth_m * 1000.0)
+    depth = np.where(depth_mm <= 65535.0, depth_mm, 0.0).astype(np.uint16)
+    return RenderResult(color=color, depth=depth, labels=labels, depth_true=depth_true)
