@@ -1,0 +1,269 @@
+"""An emulated DYNAMIXEL bus on a pseudo-terminal: real Protocol 2.0 packets, servos with a control table.
+
+``DynamixelBusEmulator`` opens a pty pair; the driver (or the DYNAMIXEL Wizard, or any SDK program)
+opens ``emulator.port`` like a U2D2 at ``/dev/ttyUSB0``. A thread parses instruction packets (CRC
+checked, byte stuffing undone) and answers like XM-series servos (and an RH-P12-RN(A) gripper): PING,
+READ, WRITE, SYNC READ, SYNC WRITE, REBOOT. Each servo keeps its control table in memory; with torque on,
+Present Position follows Goal Position, at Profile Velocity when one is set (or at once).
+
+Faults can be injected per servo (``silent``: never answers; ``alert``: hardware error bits, reported in
+every status packet and in Hardware Error Status) so tests can check that the driver stops a motion with
+a typed error. Every instruction packet received is kept in ``log`` for tests.
+
+Run it for manual work: ``python -m services.arm.drivers.dynamixel emulate``.
+"""
+
+from __future__ import annotations
+
+import os
+import pty
+import select
+import struct
+import threading
+import time
+import tty
+from dataclasses import dataclass, field
+
+from services.arm.drivers.dynamixel import protocol as p
+from services.arm.drivers.dynamixel.control_table import RH_P12_RN_A, X_SERIES, ControlTable
+
+
+@dataclass
+class EmulatedServo:
+    """One servo: an ID, a control-table layout and 1 KiB of table memory."""
+
+    dxl_id: int
+    table: ControlTable = X_SERIES
+    present_position: int = 2048
+    max_position: int = 4095
+    min_position: int = 0
+    firmware: int = 46
+    silent: bool = False
+    alert: int = 0  # Hardware Error Status bits (0 = healthy)
+    max_ticks_per_s: float = 0.0  # mechanical speed cap (0 = none), e.g. the gripper's 75 mm/s
+    memory: bytearray = field(default_factory=lambda: bytearray(1024))
+
+    def __post_init__(self) -> None:
+        t = self.table
+        struct.pack_into("<H", self.memory, 0, t.model_number)
+        self.memory[6] = self.firmware
+        self.memory[7] = self.dxl_id
+        self.memory[t.operating_mode] = t.position_mode
+        struct.pack_into("<i", self.memory, t.max_position_limit, self.max_position)
+        struct.pack_into("<i", self.memory, t.min_position_limit, self.min_position)
+        struct.pack_into("<i", self.memory, t.goal_position, self.present_position)
+        self._position = float(self.present_position)
+        self._sync_present()
+
+    # -- registers
+    def _i32(self, addr: int) -> int:
+        return struct.unpack_from("<i", self.memory, addr)[0]
+
+    @property
+    def torque_on(self) -> bool:
+        return bool(self.memory[self.table.torque_enable])
+
+    @property
+    def goal_position(self) -> int:
+        return self._i32(self.table.goal_position)
+
+    def _sync_present(self) -> None:
+        struct.pack_into("<i", self.memory, self.table.present_position, int(round(self._position)))
+        self.memory[self.table.hardware_error] = self.alert & 0xFF
+
+    def read(self, addr: int, length: int) -> tuple[int, bytes]:
+        if addr < 0 or length < 0 or addr + length > len(self.memory):
+            return p.ERR_DATA_RANGE, b""
+        self._sync_present()
+        return 0, bytes(self.memory[addr : addr + length])
+
+    def write(self, addr: int, data: bytes) -> int:
+        t = self.table
+        if addr < 0 or addr + len(data) > len(self.memory):
+            return p.ERR_DATA_RANGE
+        if addr < t.eeprom_end and self.torque_on:
+            return p.ERR_ACCESS  # EEPROM is locked while torque is on
+        if addr <= t.goal_position < addr + len(data) and len(data) >= t.goal_position - addr + 4:
+            goal = struct.unpack_from("<i", data, t.goal_position - addr)[0]
+            lo, hi = self._i32(t.min_position_limit), self._i32(t.max_position_limit)
+            if not lo <= goal <= hi:
+                return p.ERR_DATA_LIMIT
+        self.memory[addr : addr + len(data)] = data
+        return 0
+
+    def status_error(self) -> int:
+        return p.ERR_ALERT if self.alert else 0
+
+    def step(self, dt: float) -> None:
+        """Move Present Position towards Goal Position (torque on, no alert)."""
+        if not self.torque_on or self.alert:
+            return
+        goal = float(self.goal_position)
+        rate = float("inf")
+        vel_raw = struct.unpack_from("<I", self.memory, self.table.profile_velocity)[0]
+        if vel_raw and self.table is X_SERIES:
+            rate = vel_raw * self.table.velocity_unit_rpm / 60.0 * 4096.0  # ticks/s
+        if self.max_ticks_per_s:
+            rate = min(rate, self.max_ticks_per_s)
+        d = goal - self._position
+        self._position = goal if abs(d) <= rate * dt else self._position + (rate * dt if d > 0 else -rate * dt)
+
+
+def xm_arm_servos(ids: tuple[int, ...] = (1, 2, 3, 4, 5, 6)) -> list[EmulatedServo]:
+    return [EmulatedServo(i, X_SERIES) for i in ids]
+
+
+def rh_p12_rn_gripper(dxl_id: int = 7) -> EmulatedServo:
+    # closes its 106 mm stroke (740 pulses) at about 75 mm/s, as the e-manual states
+    return EmulatedServo(
+        dxl_id,
+        RH_P12_RN_A,
+        present_position=0,
+        max_position=1150,
+        min_position=0,
+        firmware=12,
+        max_ticks_per_s=740 / 1.4,
+    )
+
+
+class DynamixelBusEmulator:
+    """Servos behind a pty; ``port`` is the device path to open."""
+
+    def __init__(self, servos: list[EmulatedServo] | None = None, tick_s: float = 0.002):
+        servos = servos if servos is not None else [*xm_arm_servos(), rh_p12_rn_gripper()]
+        self.servos = {s.dxl_id: s for s in servos}
+        self.tick_s = tick_s
+        self.log: list[p.Packet] = []
+        self.crc_errors = 0
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._master, self._slave = pty.openpty()
+        tty.setraw(self._slave)
+        self.port = os.ttyname(self._slave)
+        self._thread = threading.Thread(target=self._run, name="dxl-emulator", daemon=True)
+
+    def start(self) -> DynamixelBusEmulator:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        for fd in (self._master, self._slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+    def __enter__(self) -> DynamixelBusEmulator:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def packets(self, instruction: int | None = None) -> list[p.Packet]:
+        with self._lock:
+            return [k for k in self.log if instruction is None or k.instruction == instruction]
+
+    def clear_log(self) -> None:
+        with self._lock:
+            self.log.clear()
+
+    # -- the bus
+    def _run(self) -> None:
+        buf = bytearray()
+        last = time.perf_counter()
+        while not self._stop.is_set():
+            try:
+                ready, _, _ = select.select([self._master], [], [], self.tick_s)
+            except (OSError, ValueError):
+                return
+            now = time.perf_counter()
+            with self._lock:
+                for s in self.servos.values():
+                    s.step(now - last)
+            last = now
+            if not ready:
+                continue
+            try:
+                chunk = os.read(self._master, 4096)
+            except OSError:
+                return
+            buf.extend(chunk)
+            for pkt in p.parse_packets(buf):
+                reply = self._handle(pkt)
+                if reply:
+                    try:
+                        os.write(self._master, reply)
+                    except OSError:
+                        return
+
+    def _handle(self, pkt: p.Packet) -> bytes:
+        with self._lock:
+            self.log.append(pkt)
+            if not pkt.crc_ok:
+                self.crc_errors += 1
+                s = self.servos.get(pkt.dxl_id)
+                return p.build_status(pkt.dxl_id, p.ERR_CRC) if s and not s.silent else b""
+            ins, prm = pkt.instruction, pkt.params
+            if ins == p.SYNC_WRITE:
+                return self._sync_write(prm)
+            if ins == p.SYNC_READ:
+                return self._sync_read(prm)
+            targets = (
+                list(self.servos.values())
+                if pkt.dxl_id == p.BROADCAST_ID
+                else ([self.servos[pkt.dxl_id]] if pkt.dxl_id in self.servos else [])
+            )
+            out = b""
+            for s in targets:
+                reply = self._single(s, ins, prm)
+                if s.silent or (pkt.dxl_id == p.BROADCAST_ID and ins != p.PING):
+                    continue  # silent servos never answer; broadcasts get no status, except PING
+                out += reply
+            return out
+
+    def _single(self, s: EmulatedServo, ins: int, prm: bytes) -> bytes:
+        if ins == p.PING:
+            return p.build_status(s.dxl_id, s.status_error(), struct.pack("<HB", s.table.model_number, s.firmware))
+        if ins == p.READ:
+            if len(prm) != 4:
+                return p.build_status(s.dxl_id, p.ERR_DATA_LENGTH)
+            addr, length = struct.unpack("<HH", prm)
+            err, data = s.read(addr, length)
+            return p.build_status(s.dxl_id, err or s.status_error(), data)
+        if ins == p.WRITE:
+            if len(prm) < 3:
+                return p.build_status(s.dxl_id, p.ERR_DATA_LENGTH)
+            addr = struct.unpack_from("<H", prm)[0]
+            err = s.write(addr, prm[2:])
+            return p.build_status(s.dxl_id, err or s.status_error())
+        if ins == p.REBOOT:
+            s.alert = 0
+            s.memory[s.table.torque_enable] = 0
+            return p.build_status(s.dxl_id, 0)
+        return p.build_status(s.dxl_id, p.ERR_INSTRUCTION)
+
+    def _sync_write(self, prm: bytes) -> bytes:
+        if len(prm) < 4:
+            return b""
+        addr, length = struct.unpack_from("<HH", prm)
+        body = prm[4:]
+        for k in range(0, len(body) - length, length + 1):
+            s = self.servos.get(body[k])
+            if s is not None and not s.alert:
+                s.write(addr, body[k + 1 : k + 1 + length])
+        return b""
+
+    def _sync_read(self, prm: bytes) -> bytes:
+        if len(prm) < 5:
+            return b""
+        addr, length = struct.unpack_from("<HH", prm)
+        out = b""
+        for dxl_id in prm[4:]:
+            s = self.servos.get(dxl_id)
+            if s is None or s.silent:
+                continue
+            err, data = s.read(addr, length)
+            out += p.build_status(dxl_id, err or s.status_error(), data)
+        return out
