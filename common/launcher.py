@@ -15,11 +15,11 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import zenoh
+import zenoh  # noqa: F401 - type of ServiceGroup.session
 
 from common import keys
 from common.client import live_services
-from common.zenoh_config import ZenohSettings, free_tcp_port
+from common.zenoh_config import ZenohSettings, free_tcp_port, open_session
 
 
 @dataclass
@@ -46,7 +46,7 @@ class ServiceGroup:
                  extra_env: dict[str, str] | None = None, start_router: bool = True):
         self.port = port or free_tcp_port()
         self.endpoint = f"tcp/127.0.0.1:{self.port}"
-        self.settings = ZenohSettings(mode="peer", connect=[self.endpoint], listen=["tcp/127.0.0.1:0"])
+        self.settings = ZenohSettings(mode="client", connect=[self.endpoint])
         self.robot = robot
         self.log_dir = Path(log_dir) if log_dir else None
         self.extra_env = extra_env or {}
@@ -98,7 +98,7 @@ class ServiceGroup:
     def session(self) -> zenoh.Session:
         """A client session on the group's network, for status queries and tests."""
         if self._session is None:
-            self._session = zenoh.open(self.settings.to_zenoh())
+            self._session = open_session(self.settings)
         return self._session
 
     def wait_alive(self, services: Iterable[str], timeout: float = 60.0) -> None:

@@ -38,7 +38,7 @@ from common.errors import ObjscanError, WireError
 from common.log import event, request_id, setup_logging
 from common.memory import tune_malloc
 from common.messages import Error, Health
-from common.zenoh_config import ZenohSettings
+from common.zenoh_config import ZenohSettings, wait_connected
 
 log = logging.getLogger("objscan.runtime")
 
@@ -244,6 +244,9 @@ class Service:
         """Open the session, serve until stopped, then shut down cleanly."""
         self.loop = asyncio.get_running_loop()
         self.session = zenoh.open(self.settings.zenoh.to_zenoh())
+        if self.settings.zenoh.connect and not await asyncio.to_thread(wait_connected, self.session, 10.0):
+            event(log, "no zenoh link yet; serving anyway, peers may join later", logging.WARNING,
+                  connect=",".join(self.settings.zenoh.connect))
         try:
             self.queryable(keys.health(self.name, self.instance), self._health)
             await self.setup()

@@ -8,10 +8,15 @@ Environment variables (all optional):
 | variable | meaning | default |
 |---|---|---|
 | ``OBJSCAN_ZENOH_CONFIG`` | a zenoh JSON5 config file, applied first | none |
-| ``OBJSCAN_ZENOH_MODE`` | ``peer`` or ``client`` (or ``router``) | ``peer`` |
+| ``OBJSCAN_ZENOH_MODE`` | ``client`` (through a router) or ``peer`` | ``client`` |
 | ``OBJSCAN_ZENOH_CONNECT`` | comma-separated endpoints, e.g. ``tcp/127.0.0.1:7447`` | ``tcp/127.0.0.1:7447`` |
 | ``OBJSCAN_ZENOH_LISTEN`` | comma-separated endpoints to listen on | none (peers listen on ``tcp/127.0.0.1:0``) |
 | ``OBJSCAN_ZENOH_MULTICAST`` | ``1`` to enable multicast scouting | ``0`` |
+| ``OBJSCAN_ZENOH_CONNECT_TIMEOUT_MS`` | how long a client waits for its router at start (-1: forever) | ``10000`` |
+
+Why clients by default: in Zenoh 1.x peers route only over direct links (``peer_to_peer``), so a peer that
+has not yet linked to every other peer misses some of them; clients send everything through the router,
+which sees all. Peers remain available (``OBJSCAN_ZENOH_MODE=peer``) for a flat network without a router.
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ from __future__ import annotations
 import json
 import os
 import socket
+import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -36,11 +42,12 @@ def _split(value: str | None) -> list[str]:
 class ZenohSettings:
     """How a process joins the Zenoh network."""
 
-    mode: str = "peer"
+    mode: str = "client"
     connect: list[str] = field(default_factory=lambda: [DEFAULT_CONNECT])
     listen: list[str] = field(default_factory=list)
     multicast_scouting: bool = False
     config_file: str | None = None
+    connect_timeout_ms: int = 10000
 
     @classmethod
     def from_env(cls, env: dict[str, str] | None = None) -> ZenohSettings:
@@ -56,6 +63,8 @@ class ZenohSettings:
             s.multicast_scouting = env["OBJSCAN_ZENOH_MULTICAST"].strip().lower() in ("1", "true", "yes", "on")
         if env.get("OBJSCAN_ZENOH_CONFIG"):
             s.config_file = env["OBJSCAN_ZENOH_CONFIG"]
+        if env.get("OBJSCAN_ZENOH_CONNECT_TIMEOUT_MS"):
+            s.connect_timeout_ms = int(env["OBJSCAN_ZENOH_CONNECT_TIMEOUT_MS"])
         return s
 
     def with_overrides(self, *, mode: str | None = None, connect: list[str] | None = None,
@@ -75,6 +84,7 @@ class ZenohSettings:
             "OBJSCAN_ZENOH_MODE": self.mode,
             "OBJSCAN_ZENOH_CONNECT": ",".join(self.connect),
             "OBJSCAN_ZENOH_MULTICAST": "1" if self.multicast_scouting else "0",
+            "OBJSCAN_ZENOH_CONNECT_TIMEOUT_MS": str(self.connect_timeout_ms),
         }
         if self.listen:
             env["OBJSCAN_ZENOH_LISTEN"] = ",".join(self.listen)
@@ -94,8 +104,8 @@ class ZenohSettings:
         conf.insert_json5("scouting/multicast/enabled", "true" if self.multicast_scouting else "false")
         if self.connect:
             conf.insert_json5("connect/endpoints", json.dumps(self.connect))
-            if self.mode == "client":
-                conf.insert_json5("connect/timeout_ms", "-1")  # wait for the router (compose start-up order)
+            if self.mode == "client":  # -1 waits for the router forever (compose start-up order)
+                conf.insert_json5("connect/timeout_ms", str(self.connect_timeout_ms))
         listen = self.listen or (["tcp/127.0.0.1:0"] if self.mode == "peer" and not self.config_file else [])
         if listen:
             conf.insert_json5("listen/endpoints", json.dumps(listen))
@@ -109,5 +119,24 @@ def free_tcp_port() -> int:
         return int(s.getsockname()[1])
 
 
-def open_session(settings: ZenohSettings | None = None) -> zenoh.Session:
-    return zenoh.open((settings or ZenohSettings.from_env()).to_zenoh())
+def wait_connected(session: zenoh.Session, timeout: float = 5.0) -> bool:
+    """Wait until the session has a link to a router or peer.
+
+    A peer's ``open()`` returns before its connect endpoints are reached; a query sent in that window
+    finds nobody. Returns False when nothing connected in time (the caller decides if that is an error).
+    """
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if list(session.info.routers_zid()) or list(session.info.peers_zid()):
+            return True
+        time.sleep(0.01)
+    return False
+
+
+def open_session(settings: ZenohSettings | None = None, *, connect_timeout: float = 5.0) -> zenoh.Session:
+    """Open a session and wait (briefly) until it is linked to the network it was told to connect to."""
+    settings = settings or ZenohSettings.from_env()
+    session = zenoh.open(settings.to_zenoh())
+    if settings.connect:
+        wait_connected(session, connect_timeout)
+    return session

@@ -40,7 +40,6 @@ def network_settings(connect: str | None) -> ZenohSettings:
     s = ZenohSettings.from_env()
     if connect:
         s = s.with_overrides(connect=[e for e in connect.split(",") if e])
-    s.listen = s.listen or ["tcp/127.0.0.1:0"]
     return s
 
 

@@ -1,0 +1,3 @@
+from services.grasp.service import main
+
+main()

@@ -1,0 +1,3 @@
+from services.registration.service import main
+
+main()

@@ -1,0 +1,73 @@
+"""The registration service's Zenoh face.
+
+- ``objscan/registration/static``: the scans of one view → the isolated object (``ViewResult``).
+- ``objscan/registration/dynamic``: registered views → the model; its pair jobs are spread over every
+  live registration worker (found by liveliness), a job whose worker dies is retried on another.
+- ``objscan/registration/worker/{instance}/pair``: one pair job, answered by this worker.
+
+Every instance is a worker; any one of them can coordinate a dynamic request. The algorithms live in
+``static/`` and ``dynamic/`` as plain functions; this module only decodes, schedules and encodes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from common import keys
+from common.api import StaticRequest, ViewResult
+from common.codec import Message
+from common.errors import InvalidRequest
+from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from services.registration.static.config import StaticConfig
+from services.registration.static.pipeline import register_view
+
+
+def view_result_message(view: int, result) -> ViewResult:  # noqa: ANN001 - static.result.ViewResult
+    """Wire form of a static registration result."""
+    return ViewResult(view=view, cloud=result.object_cloud, table=result.table,
+                      center=np.asarray(result.object_center, dtype=np.float64),
+                      height=float(result.object_height),
+                      scan_poses=np.stack([s.T_base_camera for s in result.scans]).astype(np.float64),
+                      figures=result.to_json())
+
+
+class RegistrationService(Service):
+    name = "registration"
+
+    async def setup(self) -> None:
+        self.jobs_done = {"static": 0, "pair": 0, "dynamic": 0}
+        self.queryable(keys.REGISTRATION_STATIC, self.static)
+        self.queryable(keys.registration_worker_pair(self.instance), self.pair)
+        self.queryable(keys.REGISTRATION_DYNAMIC, self.dynamic)
+
+    async def static(self, msg: Message | None, ctx: QueryContext) -> ViewResult:
+        if not isinstance(msg, StaticRequest):
+            raise InvalidRequest("expected a StaticRequest", detail={"got": type(msg).__name__})
+        config = StaticConfig.for_profile(msg.profile)
+        result = await self.run_cpu(register_view, msg.frames, config)
+        self.jobs_done["static"] += 1
+        return view_result_message(msg.view, result)
+
+    async def pair(self, msg: Message | None, ctx: QueryContext) -> Message:
+        from services.registration.pair_wire import pair_job_from_message, pair_result_message
+        from services.registration.dynamic.pair import register_pair
+
+        job = pair_job_from_message(msg)
+        result = await self.run_cpu(register_pair, job)
+        self.jobs_done["pair"] += 1
+        return pair_result_message(result)
+
+    async def dynamic(self, msg: Message | None, ctx: QueryContext) -> Message:
+        from services.registration.dynamic_face import build_model_distributed
+
+        result = await build_model_distributed(self, msg)
+        self.jobs_done["dynamic"] += 1
+        return result
+
+    def health_info(self) -> dict[str, object]:
+        return dict(self.jobs_done)
+
+
+def main() -> None:
+    args = service_arg_parser("objscan registration service (static, pair worker, dynamic)").parse_args()
+    run_service(lambda: RegistrationService(settings_from_args(args)))
