@@ -1,0 +1,273 @@
+"""``ArmController``: the arm's whole behaviour without any transport (the service face adds Zenoh).
+
+It holds the driver, the kinematics, the collision world (table + an optional object box the caller
+sets) and the safety envelope. Every move is planned, then checked in full (envelope: limits, workspace,
+TCP height; collisions sampled along the motion) and only then streamed to the driver, so a refused
+command never moves the arm. Moves block until finished or failed (the service face runs them in an
+executor); ``estop()`` from any other thread halts a running motion before its next set-point and
+latches until ``reset_estop()``. ``state()`` is cheap enough for a 50 Hz publisher.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from services.arm.collision import CollisionConfig, CollisionWorld
+from services.arm.drivers.base import ArmDriver, execute
+from services.arm.errors import ArmError, DriverError, MotionStopped
+from services.arm.kinematics import Kinematics, KinematicsConfig, check_transform
+from services.arm.motion import (
+    JointTrajectory,
+    LinePathConfig,
+    MotionLimits,
+    plan_joint_motion,
+    plan_linear_motion,
+)
+from services.arm.safety import SafetyConfig, SafetyEnvelope
+
+
+@dataclass
+class ArmConfig:
+    """Everything the controller needs; defaults are the simulated cell's."""
+
+    kinematics: KinematicsConfig = field(default_factory=KinematicsConfig)
+    limits: MotionLimits = field(default_factory=MotionLimits)
+    collision: CollisionConfig = field(default_factory=CollisionConfig)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+    line: LinePathConfig = field(default_factory=LinePathConfig)
+    rate_hz: float = 100.0  # set-point stream rate
+    realtime: bool = True  # False: stream as fast as the driver accepts (sim, tests)
+    default_gripper_force: float = 40.0  # N
+    gripper_tolerance: float = 0.002  # m: opening reached
+    gripper_timeout_s: float = 3.0
+    gripper_stall_s: float = 0.3  # no progress for this long = fingers closed on the object
+
+
+class ArmController:
+    """Plans, checks and executes arm and gripper commands through one ``ArmDriver``."""
+
+    def __init__(self, driver: ArmDriver, config: ArmConfig | None = None, kinematics: Kinematics | None = None):
+        self.config = config or ArmConfig()
+        self.driver = driver
+        self.kinematics = kinematics or Kinematics(self.config.kinematics)
+        self.collision = CollisionWorld(self.kinematics, self.config.collision)
+        self.safety = SafetyEnvelope(self.kinematics, self.config.safety)
+        self.safety.check_limits_fit(self.config.limits)
+        self._motion_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._estopped = False
+        self._moving = False
+        self._q = np.zeros(6)
+        self._opening = 0.0
+        self._state_data = self.kinematics.model.createData()  # state() runs beside a planning thread
+        self._state_lock = threading.Lock()
+
+    # ------------------------------------------------------------------ lifecycle
+    def connect(self) -> None:
+        self.driver.connect()
+        self._q = self.driver.read_joints()
+        self._opening = self.driver.read_gripper()
+
+    def close(self) -> None:
+        self.driver.close()
+
+    def __enter__(self) -> ArmController:
+        self.connect()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ e-stop
+    def estop(self) -> None:
+        """Halt a running motion at once (from any thread) and refuse new ones until ``reset_estop``."""
+        self._estopped = True
+        self._stop.set()
+        if not self._moving:
+            try:
+                self.driver.stop()
+            except (DriverError, ArmError):
+                pass
+
+    def reset_estop(self) -> None:
+        self._estopped = False
+        self._stop.clear()
+
+    @property
+    def estopped(self) -> bool:
+        return self._estopped
+
+    # ------------------------------------------------------------------ state
+    def state(self) -> dict:
+        """q, gripper opening, TCP and camera poses in base, moving/estop flags. No bus traffic while moving."""
+        if not self._moving:
+            try:
+                self._q = self.driver.read_joints()
+            except (DriverError, ArmError):
+                pass
+        q = self._q.copy()
+        kin = self.kinematics
+        with self._state_lock:
+            pin.forwardKinematics(kin.model, self._state_data, q)
+            Tg = pin.updateFramePlacement(kin.model, self._state_data, kin.frame_id("gripper")).homogeneous
+            Tc = pin.updateFramePlacement(kin.model, self._state_data, kin.frame_id("camera")).homogeneous
+        return {
+            "names": list(kin.joint_names),
+            "q": q,
+            "gripper_opening": float(self._opening),
+            "T_base_gripper": Tg,
+            "T_base_camera": Tc,
+            "moving": self._moving,
+            "estopped": self._estopped,
+            "stamp": time.time(),
+        }
+
+    # ------------------------------------------------------------------ planning (no motion)
+    def _current_q(self) -> np.ndarray:
+        self._q = self.driver.read_joints()
+        return self._q.copy()
+
+    def plan_joints(self, q: np.ndarray, speed_scale: float = 1.0) -> JointTrajectory:
+        q_goal = self.safety.check_joints(q)
+        return plan_joint_motion(self._current_q(), q_goal, self.config.limits, speed_scale)
+
+    def plan_pose(
+        self, T_base_frame: np.ndarray, speed_scale: float = 1.0, free_roll: bool = False, frame: str = "gripper"
+    ) -> tuple[JointTrajectory, float]:
+        """Joint-space motion to a pose (IK from the current configuration); returns (trajectory, roll)."""
+        T = check_transform(T_base_frame, "target pose")
+        q0 = self._current_q()
+        sol = self.kinematics.ik(T, q0, frame=frame, free_roll=free_roll)
+        self.safety.check_joints(sol.q)
+        return plan_joint_motion(q0, sol.q, self.config.limits, speed_scale), sol.roll
+
+    def plan_linear(
+        self, T_base_frame: np.ndarray, speed_scale: float = 1.0, frame: str = "gripper"
+    ) -> JointTrajectory:
+        T = check_transform(T_base_frame, "target pose")
+        return plan_linear_motion(
+            self.kinematics, self._current_q(), T, self.config.limits, speed_scale, frame, self.config.line
+        )
+
+    def check(self, trajectory: JointTrajectory, allow_object_contact: bool = False) -> dict:
+        """Full pre-motion check (envelope + collisions); raises on the first violation."""
+        n_env = self.safety.check_trajectory(trajectory)
+        n_col = self.collision.check_trajectory(trajectory, self._opening, allow_object_contact)
+        return {"envelope_samples": n_env, "collision_samples": n_col}
+
+    # ------------------------------------------------------------------ moves
+    def _run(self, trajectory: JointTrajectory, allow_object_contact: bool, dry_run: bool) -> dict:
+        info = {"duration_s": float(trajectory.duration), **self.check(trajectory, allow_object_contact)}
+        if dry_run:
+            return info
+        if self._estopped:
+            raise MotionStopped("emergency stop is latched; reset it before moving", code="estop_latched")
+        self._moving = True
+        try:
+            result = execute(
+                self.driver,
+                trajectory,
+                rate_hz=self.config.rate_hz,
+                realtime=self.config.realtime,
+                stop_event=self._stop,
+                check=self.safety.check_setpoint,
+                on_setpoint=self._on_setpoint,
+            )
+        finally:
+            self._moving = False
+        if result.stopped:
+            raise MotionStopped(
+                "motion halted by emergency stop",
+                detail={"after_s": round(result.elapsed_s, 3), "setpoints_sent": result.setpoints_sent},
+            )
+        info.update(setpoints_sent=result.setpoints_sent, elapsed_s=result.elapsed_s)
+        return info
+
+    def _on_setpoint(self, t: float, q: np.ndarray) -> None:
+        self._q = q
+
+    @contextmanager
+    def _exclusive(self) -> Iterator[None]:
+        """One motion at a time: a second request while moving is refused, not queued."""
+        if not self._motion_lock.acquire(blocking=False):
+            raise ArmError("another motion is running", code="busy")
+        try:
+            yield
+        finally:
+            self._motion_lock.release()
+
+    def move_joints(self, q: np.ndarray, speed_scale: float = 1.0, dry_run: bool = False) -> dict:
+        """Jerk-limited joint motion to ``q`` (6 rad). Returns timing and check figures."""
+        with self._exclusive():
+            return self._run(self.plan_joints(q, speed_scale), False, dry_run)
+
+    def move_pose(
+        self,
+        T_base_gripper: np.ndarray,
+        speed_scale: float = 1.0,
+        free_roll: bool = False,
+        frame: str = "gripper",
+        allow_object_contact: bool = False,
+        dry_run: bool = False,
+    ) -> dict:
+        """Joint-space motion putting ``frame`` (TCP by default) at a pose; ``roll`` in the reply when free."""
+        if frame == "gripper":
+            self.safety.check_tcp(T_base_gripper)
+        with self._exclusive():
+            traj, roll = self.plan_pose(T_base_gripper, speed_scale, free_roll, frame)
+            info = self._run(traj, allow_object_contact, dry_run)
+            info["roll"] = roll
+            return info
+
+    def move_linear(
+        self,
+        T_base_gripper: np.ndarray,
+        speed_scale: float = 1.0,
+        frame: str = "gripper",
+        allow_object_contact: bool = False,
+        dry_run: bool = False,
+    ) -> dict:
+        """Straight-line TCP motion (approach, lift, set down, retreat)."""
+        if frame == "gripper":
+            self.safety.check_tcp(T_base_gripper)
+        with self._exclusive():
+            return self._run(self.plan_linear(T_base_gripper, speed_scale, frame), allow_object_contact, dry_run)
+
+    def gripper(self, opening: float, force: float | None = None) -> dict:
+        """Drive the fingers to ``opening`` (m) with at most ``force`` (N); blocks until reached or stalled.
+
+        ``grasped`` is True when the fingers stopped short of the target (closed on an object).
+        """
+        o, f = self.safety.check_gripper(opening, self.config.default_gripper_force if force is None else force)
+        if self._estopped:
+            raise MotionStopped("emergency stop is latched; reset it before moving", code="estop_latched")
+        cfg = self.config
+        with self._exclusive():
+            self.driver.set_gripper(o, f)
+            t0 = last_change = time.monotonic()
+            prev = self.driver.read_gripper()
+            while True:
+                cur = self.driver.read_gripper()
+                self._opening = cur
+                if abs(cur - o) <= cfg.gripper_tolerance:
+                    return {"opening": cur, "grasped": False, "elapsed_s": time.monotonic() - t0}
+                now = time.monotonic()
+                if abs(cur - prev) > 1e-4:
+                    last_change, prev = now, cur
+                elif now - last_change > cfg.gripper_stall_s:
+                    return {"opening": cur, "grasped": True, "elapsed_s": now - t0}
+                if now - t0 > cfg.gripper_timeout_s:
+                    raise DriverError(
+                        "gripper did not reach its target in time",
+                        code="gripper_timeout",
+                        detail={"target": o, "opening": cur},
+                    )
+                if self._stop.wait(0.01):
+                    raise MotionStopped("gripper motion halted by emergency stop")
