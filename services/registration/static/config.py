@@ -1,0 +1,98 @@
+"""Configuration of static registration: one dataclass, two profiles.
+
+``StaticConfig()`` is the ``default`` profile (arm poses as the prior, region of interest, verify, global
+fallback); ``StaticConfig.paper()`` reproduces section II-A of the paper step by step. Every number has a
+default that works for a D435 at 0.3-0.6 m from a grocery-sized object; override any by keyword.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+from typing import Any, Literal
+
+Profile = Literal["default", "paper"]
+
+
+@dataclass(frozen=True)
+class StaticConfig:
+    profile: Profile = "default"
+    seed: int = 0  # seeds every RANSAC (Open3D's global random generator), so runs are reproducible
+
+    # --- back-projection -------------------------------------------------------------------------------
+    depth_min: float = 0.1  # m; the D435 returns nothing useful closer
+    depth_max: float = 1.2  # m; the workspace is within reach of the arm, farther is background
+
+    # --- region of interest (default profile) -----------------------------------------------------------
+    # Cylinder about the table normal (or a sphere when no up direction is known) around the seed point:
+    # the first scan's centre-pixel depth. Cutting early is most of the speed-up over the paper.
+    roi_radius: float | None = 0.2  # m; None disables the crop
+    roi_below: float = 0.03  # m kept below the table top (height 0 along expected_up in base)
+    roi_above: float = 0.35  # m kept above the table top
+    centre_window: int = 15  # px; the centre depth is the median valid depth in this window
+
+    # --- local registration from the arm's poses (default profile) --------------------------------------
+    local_voxels: tuple[float, ...] = (0.005, 0.002)  # coarse-to-fine pyramid
+    local_corr_factor: float = 3.0  # max correspondence distance = factor x voxel
+    local_iterations: int = 40
+    use_color: bool = True  # colored ICP at the finest level (fixes rotation about symmetric axes)
+    color_lambda_geometric: float = 0.968  # Open3D's default weight of geometry vs color
+
+    # --- verification: when is a local result trusted ----------------------------------------------------
+    min_fitness: float = 0.3  # fraction of source points with a correspondence at the finest level
+    max_rmse: float = 0.003  # m, inlier RMSE at the finest level
+    max_correction_m: float = 0.02  # m; the arm's pose is right to a few mm, a bigger jump is suspect
+    max_correction_deg: float = 4.0
+
+    # --- global registration (paper, and the default's fallback) ----------------------------------------
+    global_voxel: float = 0.01  # m; FPFH features at this voxel (radius 5 x voxel)
+    ransac_iterations: int = 100000
+    ransac_confidence: float = 0.999
+    fpfh_radius_factor: float = 5.0
+    ransac_corr_factor: float = 1.5
+
+    # --- paper pipeline (II-A) ---------------------------------------------------------------------------
+    paper_refine_voxels: tuple[float, ...] = (0.005, 0.002)  # color ICP then GICP at each
+    paper_final_voxel: float = 0.001  # point-to-plane after removing non-overlapping points
+
+    # --- pose graph of the 3 scans ----------------------------------------------------------------------
+    use_pose_graph: bool = True
+
+    # --- fusion and isolation ----------------------------------------------------------------------------
+    output_voxel: float = 0.002  # m; voxel of PC_global and of the object cloud
+    plane_distance: float = 0.004  # m; RANSAC inlier distance of the table plane
+    plane_iterations: int = 500
+    plane_voxel: float = 0.005  # m; the plane is searched on a cloud this coarse (speed), then refit
+    min_table_fraction: float = 0.15  # of the cloud's points must lie on the table plane
+    min_table_points: int = 200
+    expected_up: tuple[float, float, float] | None = (0.0, 0.0, 1.0)  # table normal in base; None: unknown
+    max_table_tilt_deg: float = 25.0
+    table_clearance: float = 0.004  # m; points closer than this to the table are table
+    max_object_height: float = 0.4  # m; above this, points are not on-table objects
+    cluster_voxel: float = 0.004  # m; DBSCAN runs on this coarser copy, labels go back by nearest point
+    dbscan_eps: float = 0.012  # m
+    dbscan_min_points: int = 8
+    min_object_points: int = 30  # points of a cluster at cluster_voxel to count as an object
+    select_by: Literal["nearest_point", "centroid"] = "nearest_point"
+
+    @classmethod
+    def paper(cls, **overrides: Any) -> StaticConfig:
+        """The paper's profile: no pose prior, no crop, global registration first, 1 mm final voxel."""
+        base = dict(
+            profile="paper", roi_radius=None, output_voxel=0.002, select_by="centroid", use_pose_graph=True
+        )
+        base.update(overrides)
+        return cls(**base)
+
+    @classmethod
+    def for_profile(cls, profile: str, **overrides: Any) -> StaticConfig:
+        if profile == "paper":
+            return cls.paper(**overrides)
+        if profile == "default":
+            return cls(**overrides)
+        raise ValueError(f"unknown static profile {profile!r} (expected 'default' or 'paper')")
+
+    def with_(self, **changes: Any) -> StaticConfig:
+        return replace(self, **changes)
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)

@@ -1,0 +1,106 @@
+"""What static registration returns for one view, and its JSON figures."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from common.geometry import transform_error
+from common.messages import Plane, PointCloud
+
+
+@dataclass
+class ScanResult:
+    """One scan's corrected pose and how it was obtained.
+
+    ``path`` is ``anchor`` for scan 0 (its believed pose defines the view's frame), else ``local`` (ICP from
+    the arm's pose passed the check), ``global`` (FPFH RANSAC then ICP won) or ``paper`` (paper profile).
+    ``fitness``/``inlier_rmse`` are measured against scan 0 at the finest registration voxel.
+    """
+
+    index: int
+    T_base_camera: np.ndarray  # corrected
+    T_base_camera_believed: np.ndarray
+    path: str
+    fitness: float
+    inlier_rmse: float
+    verified: bool
+    n_points: int
+
+    def correction(self) -> tuple[float, float]:
+        """(m, deg) between the believed and the corrected pose."""
+        return transform_error(self.T_base_camera, self.T_base_camera_believed)
+
+    def to_json(self) -> dict[str, Any]:
+        dt, dr = self.correction()
+        return {
+            "index": self.index,
+            "path": self.path,
+            "verified": self.verified,
+            "fitness": round(self.fitness, 4),
+            "inlier_rmse_mm": round(self.inlier_rmse * 1e3, 3),
+            "correction_mm": round(dt * 1e3, 3),
+            "correction_deg": round(dr, 4),
+            "n_points": self.n_points,
+            "T_base_camera": np.round(self.T_base_camera, 8).tolist(),
+        }
+
+
+@dataclass
+class ViewResult:
+    """Static registration and isolation of one view (all geometry in ``base``)."""
+
+    object_cloud: PointCloud  # xyz float32, rgb uint8, normals float32
+    table: Plane
+    object_center: np.ndarray  # (3,) footprint centre on the table
+    object_height: float  # m above the table
+    scans: list[ScanResult]
+    timings: dict[str, float]
+    profile: str
+    seed_point: np.ndarray | None  # first scan's centre-pixel point (the paper's "centre depth")
+    scene_points: int = 0  # points of PC_global at the output voxel
+    n_clusters: int = 0
+    figures: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "profile": self.profile,
+            "object_points": len(self.object_cloud),
+            "scene_points": self.scene_points,
+            "object_center": np.round(self.object_center, 6).tolist(),
+            "object_height_m": round(self.object_height, 5),
+            "table": {
+                "normal": np.round(self.table.normal, 6).tolist(),
+                "offset": round(self.table.offset, 6),
+                "center": np.round(self.table.center, 6).tolist(),
+            },
+            "n_clusters": self.n_clusters,
+            "seed_point": None if self.seed_point is None else np.round(self.seed_point, 6).tolist(),
+            "scans": [s.to_json() for s in self.scans],
+            "timings_s": {k: round(v, 4) for k, v in self.timings.items()},
+            **self.figures,
+        }
+
+
+class Stopwatch:
+    """Accumulates wall time per named step (``with sw("register"): ...``)."""
+
+    def __init__(self) -> None:
+        self.times: dict[str, float] = {}
+        self._t0 = time.perf_counter()
+
+    @contextmanager
+    def __call__(self, name: str) -> Iterator[None]:
+        t = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.times[name] = self.times.get(name, 0.0) + time.perf_counter() - t
+
+    def total(self) -> dict[str, float]:
+        return {**self.times, "total": time.perf_counter() - self._t0}
