@@ -79,35 +79,41 @@ def orthonormal_frame_from_axis(axis: np.ndarray) -> np.ndarray:
     return np.column_stack([a, b, np.cross(a, b)])
 
 
-def min_area_rectangle(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def min_area_rectangle(xy: np.ndarray, max_hull_input: int = 4000, hull_spacing: float = 0.002
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Smallest-area enclosing rectangle of 2-D points (rotating calipers over the convex hull edges).
 
-    Returns (centre (2,), axes (2, 2) as columns, full side lengths (2,)). One of the rectangle's sides
-    is collinear with a hull edge, so trying every hull edge direction is exact.
+    Returns (centre (2,), axes (2, 2) as columns, full side lengths (2,)). One side of the optimal
+    rectangle is collinear with a hull edge, so trying every hull edge direction is exact. A round
+    object puts thousands of points on its hull, so the hull is taken of an evenly strided subset of at
+    most ``max_hull_input`` points and then resampled to vertices ``hull_spacing`` apart along its
+    perimeter; the final extents use every point, so only the direction is approximate.
     """
     xy = np.asarray(xy, float)
+    thin = xy[:: max(1, len(xy) // max_hull_input)]
     try:
-        hull_pts = xy[ConvexHull(xy).vertices]
+        hull_pts = thin[ConvexHull(thin).vertices]  # counter-clockwise in 2-D
     except (QhullError, ValueError):
-        hull_pts = xy  # collinear or too few points: the direction search below still works
+        hull_pts = thin  # collinear or too few points: the direction search below still works
+    if len(hull_pts) > 8:
+        seg = np.linalg.norm(np.diff(hull_pts, axis=0), axis=1)
+        arc = np.concatenate([[0.0], np.cumsum(seg)])
+        _, keep = np.unique(np.floor(arc / hull_spacing), return_index=True)
+        hull_pts = hull_pts[keep]
     edges = np.diff(np.vstack([hull_pts, hull_pts[:1]]), axis=0)
-    lengths = np.linalg.norm(edges, axis=1)
-    edges = edges[lengths > 1e-12]
+    edges = edges[np.linalg.norm(edges, axis=1) > 1e-12]
     if len(edges) == 0:
         return xy.mean(axis=0), np.eye(2), np.zeros(2)
-    angles = np.unique(np.mod(np.arctan2(edges[:, 1], edges[:, 0]), np.pi / 2))
+    angles = np.mod(np.arctan2(edges[:, 1], edges[:, 0]), np.pi / 2)
     c, s = np.cos(angles), np.sin(angles)
-    # project hull points on (u, v) for every candidate angle at once
+    # project the hull points on (u, v) for every candidate angle at once
     u = hull_pts[:, 0:1] * c + hull_pts[:, 1:2] * s  # (H, A)
     v = -hull_pts[:, 0:1] * s + hull_pts[:, 1:2] * c
-    span_u = u.max(axis=0) - u.min(axis=0)
-    span_v = v.max(axis=0) - v.min(axis=0)
-    k = int(np.argmin(span_u * span_v))
+    k = int(np.argmin((u.max(axis=0) - u.min(axis=0)) * (v.max(axis=0) - v.min(axis=0))))
     axes = np.array([[c[k], -s[k]], [s[k], c[k]]])
-    mid_u = 0.5 * (u[:, k].max() + u[:, k].min())
-    mid_v = 0.5 * (v[:, k].max() + v[:, k].min())
-    center = axes @ np.array([mid_u, mid_v])
-    return center, axes, np.array([span_u[k], span_v[k]])
+    uv = xy @ axes  # exact extents from every point
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    return axes @ (0.5 * (lo + hi)), axes, hi - lo
 
 
 def table_aligned_box(points: np.ndarray, up: np.ndarray) -> OrientedBox:

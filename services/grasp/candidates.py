@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from services.grasp.boxes import OrientedBox, table_aligned_box
 
@@ -76,35 +77,49 @@ def central_slice(frame: ObjectFrame, thickness: float) -> np.ndarray:
     return np.flatnonzero(np.abs(frame.local[:, 0]) <= 0.5 * thickness)
 
 
+def voxel_keys(local: np.ndarray, voxel: float) -> np.ndarray:
+    """One int64 key per point naming its voxel (1-D keys sort far faster than ``unique(axis=0)``)."""
+    cells = np.floor(local / voxel).astype(np.int64)
+    cells -= cells.min(axis=0)
+    dims = cells.max(axis=0) + 1
+    return (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
+
+
 def voxel_thin(indices: np.ndarray, local: np.ndarray, voxel: float) -> np.ndarray:
     """Keep the first point of each occupied voxel (deterministic, keeps real points and normals)."""
     if len(indices) == 0:
         return indices
-    keys = np.floor(local[indices] / voxel).astype(np.int64)
-    _, first = np.unique(keys, axis=0, return_index=True)
+    _, first = np.unique(voxel_keys(local[indices], voxel), return_index=True)
     return indices[np.sort(first)]
 
 
-def surface_variation(points: np.ndarray, query: np.ndarray, radius: float) -> np.ndarray:
-    """PCL's curvature λmin / (λ0 + λ1 + λ2) of each query point's radius neighbourhood in ``points``.
+def surface_variation(points: np.ndarray, query: np.ndarray, radius: float, k: int = 20) -> np.ndarray:
+    """PCL's curvature λmin / (λ0 + λ1 + λ2) of each query point's neighbourhood in ``points``.
 
-    Brute force on purpose: the regions are small (tens of queries against a few thousand points), so a
-    dense distance matrix beats building a KD-tree over the whole cloud.
+    The neighbourhood is the ``k`` nearest points within ``radius`` (a KD-tree over the small patch
+    around the regions, not over the whole cloud).
     """
     if len(query) == 0:
         return np.zeros(0)
-    d2 = ((query[:, None, :] - points[None, :, :]) ** 2).sum(axis=2)
-    W = (d2 <= radius * radius).astype(float)  # (Q, M)
-    n = W.sum(axis=1)
-    s1 = W @ points  # (Q, 3)
-    outer = (points[:, :, None] * points[:, None, :]).reshape(len(points), 9)
-    s2 = (W @ outer).reshape(len(query), 3, 3)
-    mean = s1 / np.maximum(n, 1)[:, None]
-    cov = s2 / np.maximum(n, 1)[:, None, None] - mean[:, :, None] * mean[:, None, :]
+    if len(points) < 3:
+        return np.zeros(len(query))
+    origin = query.mean(axis=0)  # centred coordinates keep the second moments precise
+    P, Q = points - origin, query - origin
+    k = min(k, len(P))
+    dist, idx = cKDTree(P).query(Q, k=k, distance_upper_bound=radius)
+    dist = dist.reshape(len(Q), k)
+    valid = np.isfinite(dist)
+    idx = np.where(valid, idx.reshape(len(Q), k), 0)
+    w = valid.astype(float)[:, :, None]
+    n = w.sum(axis=1)  # (Q, 1)
+    nb = P[idx] * w  # (Q, k, 3)
+    mean = nb.sum(axis=1) / np.maximum(n, 1.0)
+    cov = np.einsum("qki,qkj->qij", nb, P[idx]) / np.maximum(n, 1.0)[:, :, None] \
+        - mean[:, :, None] * mean[:, None, :]
     eig = np.linalg.eigvalsh(cov)
     trace = eig.sum(axis=1)
-    curv = np.where(trace > 1e-18, np.abs(eig[:, 0]) / np.where(trace > 1e-18, trace, 1.0), 0.0)
-    curv[n < 3] = 0.0
+    curv = np.abs(eig[:, 0]) / np.where(trace > 1e-18, trace, 1.0)
+    curv[(n[:, 0] < 3) | (trace <= 1e-18)] = 0.0
     return curv
 
 
@@ -120,15 +135,18 @@ def candidate_regions(frame: ObjectFrame, fingertip: float, slice_thickness: flo
         return [], 0
     ext = frame.extents
     half = 0.5 * np.array([fingertip, min(fingertip, ext[1] / 3.0), min(fingertip, ext[2] / 3.0)])
+    # every region lies in the slab |x| <= half_x (+ the curvature radius): mask the cloud once
+    slab = np.flatnonzero(np.abs(local[:, 0]) <= half[0] + curvature_radius)
+    slab_local = local[slab]
     regions = []
     for axis_name, col in (("y", 1), ("z", 2)):
         coords = local[slice_idx, col]
         for side, pick in ((-1, int(np.argmin(coords))), (1, int(np.argmax(coords)))):
             seed = int(slice_idx[pick])
-            offset = np.abs(local - local[seed])
-            idx = np.flatnonzero(np.all(offset <= half, axis=1))
+            offset = np.abs(slab_local - local[seed])
+            idx = slab[np.all(offset <= half, axis=1)]
             kept = voxel_thin(idx, local, voxel)
-            near = np.flatnonzero(np.all(offset <= half + curvature_radius, axis=1))
+            near = slab[np.all(offset <= half + curvature_radius, axis=1)]
             curv = surface_variation(local[near], local[kept], curvature_radius)
             regions.append(CandidateRegion(axis_name, side, seed, kept, curv, np.abs(local[kept, 0])))
     return regions, len(slice_idx)

@@ -48,7 +48,10 @@ def fit_circle_2d(points: np.ndarray, refine_iterations: int = 5) -> CircleFit |
             break
         res = dist - r
         J = np.column_stack([-diff / dist[:, None], -np.ones(len(q))])
-        step, *_ = np.linalg.lstsq(J, -res, rcond=None)
+        try:  # normal equations: a 3x3 solve is far cheaper than an SVD of the N x 3 Jacobian
+            step = np.linalg.solve(J.T @ J, -(J.T @ res))
+        except np.linalg.LinAlgError:
+            break
         c = c + step[:2]
         r = r + float(step[2])
         if np.linalg.norm(step) < 1e-10:
@@ -60,8 +63,8 @@ def fit_circle_2d(points: np.ndarray, refine_iterations: int = 5) -> CircleFit |
 
 
 def estimate_object_center(local_points: np.ndarray, extents: np.ndarray, slice_thickness: float,
-                           n_slices: int, min_points: int, rng: np.random.Generator
-                           ) -> tuple[np.ndarray, int]:
+                           n_slices: int, min_points: int, rng: np.random.Generator,
+                           max_points_per_slice: int = 400) -> tuple[np.ndarray, int]:
     """Mean of circle centres fitted to random yz-slices of an axis-aligned cloud.
 
     ``local_points`` are in the object's box frame (x = main axis, centred on the box); ``extents`` the
@@ -71,14 +74,16 @@ def estimate_object_center(local_points: np.ndarray, extents: np.ndarray, slice_
     """
     half_x = 0.5 * float(extents[0])
     max_radius = float(np.hypot(extents[1], extents[2]))
-    xs = local_points[:, 0]
+    order = np.argsort(local_points[:, 0])  # sorted once; each slice is then two binary searches
+    xs = local_points[order, 0]
     positions = rng.uniform(-half_x + 0.5 * slice_thickness, half_x - 0.5 * slice_thickness,
                             size=n_slices) if half_x > slice_thickness else np.zeros(1)
     centres = []
     for x0 in positions:
-        sel = np.abs(xs - x0) <= 0.5 * slice_thickness
-        if np.count_nonzero(sel) < min_points:
+        lo, hi = np.searchsorted(xs, [x0 - 0.5 * slice_thickness, x0 + 0.5 * slice_thickness])
+        if hi - lo < min_points:
             continue
+        sel = order[lo:hi:max(1, (hi - lo) // max_points_per_slice)]
         fit = fit_circle_2d(local_points[sel, 1:])
         if fit is None or fit.radius > max_radius:
             continue

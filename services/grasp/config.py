@@ -97,6 +97,11 @@ class GraspPlannerConfig:
     """A grasp line steeper than this against the table plane cannot be held by a horizontal
     (frontal) or vertical (top-down) approach: rejected as ``grasp_line_not_horizontal``."""
 
+    max_contact_angle_deg: float = 20.0
+    """Both contact normals must lie within this angle of the grasp line (``not_antipodal``). Not in
+    GeoGrasp: its r2 >= 1 test lets a pair with cosα = 0 through whenever both points have the region's
+    lowest curvature (min-max normalisation makes that 0), e.g. two points on one flat face."""
+
     # --- collisions
     table_box_size: float = 0.5
     table_box_height: float = 0.025
@@ -144,8 +149,9 @@ class GraspPlannerConfig:
         if self.mode not in ("auto", "frontal", "top_down", "both"):
             raise GraspConfigError(f"unknown planner mode {self.mode!r}",
                                    detail={"allowed": ["auto", "frontal", "top_down", "both"]})
-        if not 0.0 < self.max_grasp_line_tilt_deg < 90.0:
-            raise GraspConfigError("max_grasp_line_tilt_deg must be in (0, 90)")
+        for name in ("max_grasp_line_tilt_deg", "max_contact_angle_deg"):
+            if not 0.0 < getattr(self, name) <= 90.0:
+                raise GraspConfigError(f"{name} must be in (0, 90]", detail={name: getattr(self, name)})
         for name in ("pregrasp_distance", "top_down_crop"):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0):

@@ -95,7 +95,7 @@ def validate_inputs(cloud_xyz: Any, normals: Any, table: Plane) -> PlanningInput
         raise GraspInputError("table plane has a zero or non-finite normal/offset", code="bad_table")
     up, offset = up / norm, offset / norm
     heights = xyz @ up + offset
-    if np.median(heights) < 0:  # the paper's sign fix: the normal must point toward the object
+    if np.count_nonzero(heights > 0) < 0.5 * len(heights):  # the paper's sign fix: normal toward object
         up, offset, heights = -up, -offset, -heights
     return PlanningInput(xyz, nrm, up, offset, heights)
 

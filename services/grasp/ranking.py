@@ -6,7 +6,8 @@ For every pair (i in region A, j in region B):
     r1    = 2 − d̂i − d̂j − 10·(cosβ − 0.2)
     r2    = 2 − ĉi − ĉj + 2·min(cosαi, cosαj)
     rank  = 1.5·r1 + r2
-Pairs with r1 < 1 or r2 < 1, or wider than the gripper opens, are dropped. The whole pair table is
+Pairs with r1 < 1 or r2 < 1, or wider than the gripper opens, are dropped; so are (our addition)
+pairs whose grasp line is too steep for the approach and pairs that are not antipodal. The whole pair table is
 computed at once with numpy broadcasting.
 """
 
@@ -19,7 +20,7 @@ import numpy as np
 from services.grasp.candidates import CandidateRegion
 from services.grasp.config import GraspPlannerConfig
 
-PAIR_REASONS = ("too_wide", "grasp_line_not_horizontal", "rank_below_threshold")
+PAIR_REASONS = ("too_wide", "grasp_line_not_horizontal", "not_antipodal", "rank_below_threshold")
 
 
 def minmax_normalise(x: np.ndarray) -> np.ndarray:
@@ -76,8 +77,10 @@ def rank_region_pair(a: CandidateRegion, b: CandidateRegion, points: np.ndarray,
     g = cfg.gripper
     too_wide = (width > g.max_opening) | (width < g.min_opening) | (width < 1e-9)
     not_horizontal = ~too_wide & (sin_tilt > np.sin(np.radians(cfg.max_grasp_line_tilt_deg)))
-    low_rank = ~too_wide & ~not_horizontal & ((r1 < cfg.r1_min) | (r2 < cfg.r2_min))
-    valid = ~(too_wide | not_horizontal | low_rank)
+    not_antipodal = ~too_wide & ~not_horizontal & (
+        np.minimum(cos_a1, cos_a2) < np.cos(np.radians(cfg.max_contact_angle_deg)))
+    low_rank = ~(too_wide | not_horizontal | not_antipodal) & ((r1 < cfg.r1_min) | (r2 < cfg.r2_min))
+    valid = ~(too_wide | not_horizontal | not_antipodal | low_rank)
 
     def pair(flat: int) -> RankedPair:
         ia, ib = np.unravel_index(flat, rank.shape)
@@ -104,7 +107,7 @@ def rank_region_pair(a: CandidateRegion, b: CandidateRegion, points: np.ndarray,
         return [pair(int(f)) for f in top]
 
     counts, examples = {}, {}
-    for reason, mask in zip(PAIR_REASONS, (too_wide, not_horizontal, low_rank), strict=True):
+    for reason, mask in zip(PAIR_REASONS, (too_wide, not_horizontal, not_antipodal, low_rank), strict=True):
         n = int(np.count_nonzero(mask))
         if n:
             counts[reason] = n

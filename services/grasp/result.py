@@ -14,6 +14,7 @@ REASONS = (
     "too_few_points",
     "too_wide",
     "grasp_line_not_horizontal",
+    "not_antipodal",
     "rank_below_threshold",
     "collides_with_table",
     "collides_with_object",
@@ -59,8 +60,8 @@ class PlannedGrasp:
 class Rejections:
     """Counts per reason and up to ``max_examples`` examples (JSON-able dicts) per reason.
 
-    Pair-level reasons (too_wide, grasp_line_not_horizontal, rank_below_threshold) count contact
-    pairs; the others count grasps or whole attempts.
+    Pair-level reasons (too_wide, grasp_line_not_horizontal, not_antipodal, rank_below_threshold) count
+    contact pairs; the others count grasps or whole attempts.
     """
 
     max_examples: int = 3
