@@ -1,0 +1,133 @@
+"""Ready-made simulated scans for tests and benchmarks: no services, no arm, just the twin.
+
+``simulated_views`` does what an acquisition does to the object, minus the grasping: for each view it
+scans the object from a few camera poses around its front, then a person turns it by 30° (with the
+profile's turn and placement errors) before the next view. Frames carry the commanded cumulative turn and
+the true object pose, so static and dynamic registration can be tested and benchmarked against ground
+truth; ``write_session`` stores them as a session folder (common/session_folder.py).
+
+Deterministic for a seed: the same call gives byte-identical images.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from common.geometry import look_at
+from common.messages import Intrinsics, RGBDFrame
+from common.session_folder import write_scan
+from common.session_folder import write_session as write_session_json
+from services.sim.errors import SimInputError
+from services.sim.profiles import ErrorProfile, get_profile, hand_turn
+from services.sim.sensor_model import d435_intrinsics
+from services.sim.world import World, default_object_pose
+
+
+@dataclass(frozen=True)
+class ScanPoses:
+    """Camera poses of one view: on a sphere around the object's centre, spread around its front (the
+    side facing the robot base, azimuth 180° in base), looking at the centre."""
+
+    distances_m: tuple[float, ...] = (0.40, 0.38, 0.42)
+    elevations_deg: tuple[float, ...] = (40.0, 32.0, 48.0)
+    azimuth_offsets_deg: tuple[float, ...] = (0.0, -25.0, 25.0)
+    front_azimuth_deg: float = 180.0
+
+    def poses(self, center: np.ndarray, count: int) -> list[np.ndarray]:
+        """``count`` camera poses (T_base_camera, optical frame); beyond the listed ones the pattern repeats
+        with the azimuth spread narrowed so no two poses coincide."""
+        out = []
+        n = len(self.azimuth_offsets_deg)
+        for j in range(count):
+            k, rnd = j % n, j // n
+            az = np.radians(self.front_azimuth_deg + self.azimuth_offsets_deg[k] / (1 + rnd) + 7.0 * rnd)
+            el = np.radians(self.elevations_deg[k % len(self.elevations_deg)])
+            d = self.distances_m[k % len(self.distances_m)]
+            eye = center + d * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+            out.append(camera_look_at(eye, center))
+        return out
+
+
+def camera_look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """T_base_camera (optical frame) at ``eye`` looking at ``target`` with the image upright (world up
+    appears up, i.e. the camera's y axis points down)."""
+    T = look_at(eye, target, (0.0, 0.0, 1.0))
+    if T[2, 1] > 0:  # the image's down direction points up: roll by 180° about the optical axis
+        T[:3, :2] = -T[:3, :2]
+    return T
+
+
+def simulated_views(object_name: str, *, views: int = 12, scans_per_view: int = 3,
+                    profile: str | ErrorProfile = "ideal", seed: int = 0, intrinsics: Intrinsics | None = None,
+                    turn_deg: float = 30.0, object_pose: np.ndarray | None = None,
+                    scan_poses: ScanPoses = ScanPoses(), world: World | None = None) -> list[list[RGBDFrame]]:
+    """Scan ``object_name`` (HOPE name or mesh path) over ``views`` views of ``scans_per_view`` frames,
+    hand-turning it by ``turn_deg`` between views.
+
+    Returns ``frames[view][scan]``. Each frame's ``T_base_camera`` is the believed pose and
+    ``T_base_camera_true`` the truth; ``meta`` holds ``view``, ``scan``, ``commanded_turn_deg`` (cumulative,
+    ``turn_deg * view``), ``achieved_turn_deg_true`` (cumulative, ground truth), ``T_base_object_true``,
+    ``object``, ``profile`` and ``seed``. Default intrinsics: D435 640x480.
+    """
+    if views < 1 or scans_per_view < 1:
+        raise SimInputError("views and scans_per_view must be at least 1", code="bad_value",
+                            detail={"views": views, "scans_per_view": scans_per_view})
+    K = intrinsics or d435_intrinsics()
+    prof = get_profile(profile)
+    if world is None:
+        world = World(object_name, profile=prof, seed=seed,
+                      object_pose=default_object_pose() if object_pose is None else object_pose)
+    height = world.obj.height
+    out: list[list[RGBDFrame]] = []
+    achieved_total = 0.0
+    seq = 0
+    for v in range(views):
+        if v > 0:
+            achieved_total += hand_turn(world, turn_deg, None)
+        T_obj = world.true_object_pose()
+        center = T_obj[:3, 3] + np.array([0.0, 0.0, height / 2.0])
+        frames = []
+        for j, T_cam in enumerate(scan_poses.poses(center, scans_per_view)):
+            frame = world.render_frame(T_cam, K, seq, stamp=seq / 30.0)
+            frame.meta.update({"view": v, "scan": j, "commanded_turn_deg": turn_deg * v,
+                               "achieved_turn_deg_true": achieved_total, "seed": world.seed})
+            frames.append(frame)
+            seq += 1
+        out.append(frames)
+    return out
+
+
+def write_session(directory: str | Path, views: list[list[RGBDFrame]], *, extra: dict[str, Any] | None = None) -> Path:
+    """Write ``views`` (as returned by ``simulated_views``) as a session folder; returns its path.
+
+    session.json holds ``object``, ``profile``, ``seed``, ``source: "sim"`` and ``views`` with each view's
+    cumulative ``commanded_turn_deg`` and, in a ``ground_truth`` block, the true object pose and turn.
+    """
+    if not views or not views[0]:
+        raise SimInputError("no frames to write", code="bad_value")
+    session = Path(directory)
+    session.mkdir(parents=True, exist_ok=True)
+    first = views[0][0].meta
+    entries = []
+    for k, frames in enumerate(views):
+        for j, frame in enumerate(frames):
+            write_scan(session, k, j, frame)
+        meta = frames[0].meta
+        entries.append({
+            "index": k,
+            "commanded_turn_deg": float(meta.get("commanded_turn_deg", 0.0)),
+            "scans": len(frames),
+            "ground_truth": {"T_base_object": np.asarray(meta.get("T_base_object_true")).tolist()
+                             if meta.get("T_base_object_true") is not None else None,
+                             "achieved_turn_deg": meta.get("achieved_turn_deg_true")},
+        })
+    data = {"object": first.get("object"), "profile": first.get("profile"), "seed": first.get("seed"),
+            "source": "sim", "views": entries}
+    if extra:
+        data.update(extra)
+    write_session_json(session, data)
+    return session
