@@ -84,7 +84,11 @@ class GraspPlannerConfig:
     """Neighbourhood radius of the surface-variation curvature of candidate points."""
     min_region_points: int = 3
     candidates_per_axis: int = 1
-    """How many best pairs per region axis go on to collision filtering (the paper: 1)."""
+    """Grasps kept per region axis (the paper: the best one)."""
+    max_checks_per_axis: int = 25
+    """How far down an axis's ranking the collision filter goes looking for a collision-free pair: the
+    paper checks only the best pair, which loses e.g. a lying can whose best pair is tilted so the palm
+    grazes the table while the next pair is level."""
 
     # --- ranking
     w1: float = 1.5

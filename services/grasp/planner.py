@@ -158,8 +158,10 @@ def _plan_frontal(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, cf
             "why": "a horizontal hand at the object's top would still reach into the table"})
         return []
     table = table_box(inp.xyz, inp.up, inp.offset, cfg.table_box_size, cfg.table_box_height)
-    out = []
+    out: list[PlannedGrasp] = []
     for pair, axis in _ranked_pairs(inp.xyz, inp.normals, inp.up, frame, cfg, "frontal", rej):
+        if _axis_full(out, axis, cfg):
+            continue
         p1, p2 = inp.xyz[pair.i], inp.xyz[pair.j]
         R, swapped = frontal_rotation(p1, p2, inp.up, np.asarray(cfg.approach_origin, float))
         p_plus, p_minus = (p2, p1) if swapped else (p1, p2)
@@ -195,8 +197,10 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
     xyz, nrm = inp.xyz[keep], inp.normals[keep]
     crop_frame = object_frame(xyz, inp.up)
     below = remainder_box(inp.heights, crop_bottom, inp.up, inp.offset, frame.box)
-    out = []
+    out: list[PlannedGrasp] = []
     for pair, axis in _ranked_pairs(xyz, nrm, inp.up, crop_frame, cfg, "top_down", rej):
+        if _axis_full(out, axis, cfg):
+            continue
         p1, p2 = xyz[pair.i], xyz[pair.j]
         R, swapped = top_down_rotation(p1, p2, inp.up, np.asarray(cfg.approach_origin, float))
         p_plus, p_minus = (p2, p1) if swapped else (p1, p2)
@@ -223,7 +227,8 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
 
 def _ranked_pairs(xyz: np.ndarray, normals: np.ndarray, up: np.ndarray, frame: ObjectFrame,
                   cfg: GraspPlannerConfig, kind: str, rej: Rejections) -> list[tuple[RankedPair, str]]:
-    """The best valid pairs of the y and the z regions; pair-level rejections go to ``rej``."""
+    """The valid pairs of the y and the z regions, best first per axis (at most
+    ``max_checks_per_axis`` each); pair-level rejections go to ``rej``."""
     regions, n_slice = candidate_regions(frame, cfg.gripper.pad_width, cfg.slice_thickness,
                                          cfg.region_voxel, cfg.curvature_radius)
     if not regions:
@@ -238,13 +243,17 @@ def _ranked_pairs(xyz: np.ndarray, normals: np.ndarray, up: np.ndarray, frame: O
             rej.add("too_few_points", example={"kind": kind, "axis": axis,
                                                "region_points": [len(a.indices), len(b.indices)]})
             continue
-        ranking = rank_region_pair(a, b, xyz, normals, frame.main_axis, up, cfg, cfg.candidates_per_axis)
+        ranking = rank_region_pair(a, b, xyz, normals, frame.main_axis, up, cfg, cfg.max_checks_per_axis)
         for reason, count in ranking.rejected_counts.items():
             ex = ranking.rejected_best[reason]
             rej.add(reason, count, {"kind": kind, "axis": axis, "pairs": count,
                                     "best_contacts": [xyz[ex.i], xyz[ex.j]], **ex.metrics})
         out += [(p, axis) for p in ranking.best]
     return out
+
+
+def _axis_full(found: list[PlannedGrasp], axis: str, cfg: GraspPlannerConfig) -> bool:
+    return sum(g.axis == axis for g in found) >= cfg.candidates_per_axis
 
 
 def _object_hits(boxes: dict[str, OrientedBox], xyz: np.ndarray, cfg: GraspPlannerConfig

@@ -1,7 +1,7 @@
 """Analytic object clouds with exact outward normals, standing on the table z = 0 of ``base``.
 
-Points are sampled uniformly by area; ``view_from`` keeps only the points whose normal faces that
-camera position, which is exact visibility for the convex shapes used here (a partial view as the
+Points are sampled uniformly by area; ``view_from`` (one camera position or several) keeps only
+the points whose normal faces a camera, which is exact visibility for the convex shapes used here (a partial view as the
 wrist camera sees it). The face resting on the table is never sampled: no camera sees it.
 """
 
@@ -15,13 +15,26 @@ OBJECT_XY = np.array([0.36, 0.0])
 CAMERA = np.array([0.10, 0.0, 0.30])  # a wrist-camera position in front of and above the object
 
 
+def scan_cameras(radius: float = 0.26, height: float = 0.30, spread_deg: float = 50.0) -> list[np.ndarray]:
+    """Three wrist-camera positions like the paper's three scan poses: in front of the object (toward
+    the arm's base) and ``spread_deg`` to either side; one registered view is their union."""
+    out = []
+    for az in (-spread_deg, 0.0, spread_deg):
+        a = np.radians(180.0 + az)  # the base is at -x from the object
+        out.append(np.array([OBJECT_XY[0] + radius * np.cos(a), OBJECT_XY[1] + radius * np.sin(a), height]))
+    return out
+
+
 def table_plane() -> Plane:
     return Plane(normal=np.array([0.0, 0.0, 1.0]), offset=0.0, center=np.array([0.4, 0.0, 0.0]))
 
 
 def _finish(p: np.ndarray, n: np.ndarray, view_from, noise: float, rng) -> tuple[np.ndarray, np.ndarray]:
     if view_from is not None:
-        keep = np.einsum("ij,ij->i", n, np.asarray(view_from, float) - p) > 0
+        cams = np.atleast_2d(np.asarray(view_from, float))
+        keep = np.zeros(len(p), bool)
+        for cam in cams:
+            keep |= np.einsum("ij,ij->i", n, cam - p) > 0
         p, n = p[keep], n[keep]
     if noise > 0:
         p = p + rng.normal(0.0, noise, p.shape)
