@@ -95,10 +95,10 @@ class RealSenseCamera(Camera):
     def _open(self) -> None:
         rs = _rs()
         cfg = rs.config()
-        pipeline = rs.pipeline(rs.context())
+        ctx = rs.context()
+        pipeline = rs.pipeline(ctx)
         if self.config.playback_file is not None:
-            path = self._check_playback_file(Path(self.config.playback_file))
-            cfg.enable_device_from_file(str(path), repeat_playback=False)
+            pipeline.set_device(self._load_playback(ctx, Path(self.config.playback_file)))
             cfg.enable_stream(rs.stream.depth)
             cfg.enable_stream(rs.stream.color)
         else:
@@ -121,9 +121,6 @@ class RealSenseCamera(Camera):
         self._pipeline = pipeline
         try:
             device = profile.get_device()
-            if self.config.playback_file is not None:
-                self._playback = device.as_playback()
-                self._playback.set_real_time(False)  # serve every frame, in order, however slow we read
             try:
                 self._depth_scale = float32_value(device.first_depth_sensor().get_depth_scale())
             except RuntimeError as exc:
@@ -139,13 +136,27 @@ class RealSenseCamera(Camera):
             self._stop_pipeline()
             raise
 
-    def _check_playback_file(self, path: Path) -> Path:
+    def _load_playback(self, ctx: Any, path: Path) -> Any:
+        """Open a recording as a non-real-time playback device *before* the pipeline starts.
+
+        Switching to non-real-time after ``pipeline.start`` (or using ``enable_device_from_file``) lets
+        the first frames play in real time, and the pipeline's one-frame queue then drops whatever a slow
+        reader has not taken: measured, 1 to 2 of 3 recorded frames lost at random. Loaded like this,
+        playback waits for the reader and every frame is served once, in order.
+        """
         if not path.is_file():
             raise ReplayDataError(f"playback file {path} does not exist", detail={"file": str(path)})
         if path.suffix.lower() not in PLAYBACK_SUFFIXES:
             raise ReplayDataError(f"playback file {path} is not a RealSense recording (.db3 or .bag)",
                                   detail={"file": str(path)})
-        return path
+        try:
+            device = ctx.load_device(str(path))
+            self._playback = device.as_playback()
+            self._playback.set_real_time(False)
+        except RuntimeError as exc:
+            self._playback = None
+            raise ReplayDataError(f"cannot play back {path}: {exc}", detail={"file": str(path)}) from None
+        return device
 
     def _find_serial(self, rs: Any) -> str:
         devices = rs.context().query_devices()

@@ -1,0 +1,3 @@
+from services.camera.service import main
+
+main()
