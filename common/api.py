@@ -39,6 +39,8 @@ class MoveRequest(Message):
     frame: str = "gripper"
     speed_scale: float = 0.5
     free_roll: bool = False
+    allow_object_contact: bool = False  # the pads may touch the object box (final grasp approach)
+    dry_run: bool = False  # plan and check only: reachability without motion
 
     def validate(self) -> None:
         if self.kind not in ("joints", "pose", "linear", "home"):

@@ -104,7 +104,7 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = (0.0, 0.0, 1.0
     z = np.asarray(target, dtype=float) - eye
     z /= np.linalg.norm(z)
     up = np.asarray(up, dtype=float)
-    x = np.cross(z, -up)
+    x = np.cross(z, up)  # image right; then y = z x x points down in the image (optical frame)
     if np.linalg.norm(x) < 1e-9:  # looking straight along `up`: pick any perpendicular
         x = np.cross(z, [1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.cross(z, [0.0, 1.0, 0.0])
     x /= np.linalg.norm(x)

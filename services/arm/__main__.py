@@ -1,0 +1,3 @@
+from services.arm.service import main
+
+main()

@@ -1,0 +1,151 @@
+"""The arm service's Zenoh face.
+
+- ``arm/move`` (``MoveRequest``) → ``MoveResult`` when the motion has finished (or a typed error: unreachable,
+  colliding with the link pair named, outside the envelope, stopped); ``dry_run`` checks reachability only.
+- ``arm/gripper`` (``GripperRequest``) → ``GripperResult`` (opening reached, holding something or not).
+- ``arm/stop`` → halts any motion at once (handled on the event loop, never queued behind a move);
+  ``Request(params={"reset": true})`` clears a latched stop.
+- ``arm/scene`` (``SceneRequest``) → the object box the collision checker avoids.
+- ``arm/state``: queryable and a ≥ 50 Hz ``JointState`` stream with TCP and camera poses.
+"""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+
+from common import keys
+from common.api import GripperRequest, GripperResult, MoveRequest, MoveResult, SceneRequest
+from common.codec import Message
+from common.errors import InvalidRequest
+from common.messages import JointState, Ok, Request
+from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from services.arm.arm import ArmConfig, ArmController
+from services.arm.kinematics import Kinematics
+
+STATE_RATE_HZ = 50.0
+
+
+class ArmService(Service):
+    name = "arm"
+
+    async def setup(self) -> None:
+        opts = self.settings.options
+        self.backend = opts.get("backend", "sim")
+        config = ArmConfig(realtime=self.backend != "sim")
+        kin = Kinematics(config.kinematics)
+        driver = self._make_driver(kin, opts)
+        self.arm = ArmController(driver, config, kinematics=kin)
+        await self.run_cpu(self.arm.connect)
+        r = self.robot
+        self.queryable(keys.arm(r, "move"), self.move)
+        self.queryable(keys.arm(r, "gripper"), self.gripper)
+        self.queryable(keys.arm(r, "stop"), self.stop_motion)
+        self.queryable(keys.arm(r, "scene"), self.scene)
+        self.queryable(keys.arm(r, "state"), self.state)
+        self.state_pub = self.publisher(keys.arm(r, "state"), block=False)
+        self.spawn(self._stream_state())
+
+    def _make_driver(self, kin: Kinematics, opts: dict):  # noqa: ANN202
+        if self.backend == "sim":
+            from services.arm.twin_link import TwinLinkedDriver
+
+            return TwinLinkedDriver(self.session, self.robot, kin)
+        if self.backend == "dynamixel":
+            from services.arm.drivers.dynamixel.config import DynamixelConfig
+            from services.arm.drivers.dynamixel.driver import DynamixelArmDriver
+
+            return DynamixelArmDriver(DynamixelConfig(port=opts.get("port", "/dev/ttyUSB0"),
+                                                      baudrate=int(opts.get("baud", 1_000_000))))
+        if self.backend == "replay":
+            from pathlib import Path
+
+            from services.arm.drivers.replay.driver import ReplayArmDriver
+
+            return ReplayArmDriver.from_session(Path(opts["session"]))
+        raise InvalidRequest(f"unknown arm backend {self.backend!r}")
+
+    def _joint_state(self) -> JointState:
+        s = self.arm.state()
+        return JointState(names=s["names"], position=np.asarray(s["q"], dtype=np.float64), stamp=s["stamp"],
+                          T_base_gripper=s["T_base_gripper"], T_base_camera=s["T_base_camera"],
+                          gripper_opening=s["gripper_opening"], moving=s["moving"])
+
+    async def _stream_state(self) -> None:
+        period = 1.0 / STATE_RATE_HZ
+        while True:
+            try:
+                self.state_pub.put(self._joint_state())
+            except Exception:  # a bus hiccup must not end the stream; the next tick retries
+                pass
+            await asyncio.sleep(period)
+
+    def _result(self, info: dict) -> MoveResult:
+        s = self.arm.state()
+        return MoveResult(q=np.asarray(s["q"], dtype=np.float64), T_base_gripper=s["T_base_gripper"],
+                          T_base_camera=s["T_base_camera"], duration_s=float(info.get("duration_s", 0.0)),
+                          info={k: v for k, v in info.items() if isinstance(v, (int, float, str, bool))})
+
+    async def move(self, msg: Message | None, ctx: QueryContext) -> MoveResult:
+        if not isinstance(msg, MoveRequest):
+            raise InvalidRequest("expected a MoveRequest", detail={"got": type(msg).__name__})
+        a = self.arm
+        if msg.kind == "joints":
+            info = await self.run_cpu(a.move_joints, msg.q, msg.speed_scale, msg.dry_run)
+        elif msg.kind == "home":
+            q = np.asarray(a.driver.config.initial_q if hasattr(a.driver, "config") else np.zeros(6))
+            info = await self.run_cpu(a.move_joints, q, msg.speed_scale, msg.dry_run)
+        elif msg.kind == "pose":
+            info = await self.run_cpu(a.move_pose, msg.target, msg.speed_scale, msg.free_roll, msg.frame,
+                                      msg.allow_object_contact, msg.dry_run)
+        else:
+            info = await self.run_cpu(a.move_linear, msg.target, msg.speed_scale, msg.frame,
+                                      msg.allow_object_contact, msg.dry_run)
+        return self._result(info)
+
+    async def gripper(self, msg: Message | None, ctx: QueryContext) -> GripperResult:
+        if not isinstance(msg, GripperRequest):
+            raise InvalidRequest("expected a GripperRequest", detail={"got": type(msg).__name__})
+        info = await self.run_cpu(self.arm.gripper, msg.opening, msg.force)
+        last = getattr(self.arm.driver, "last_gripper", None)
+        reason = last.reason if last is not None else ""
+        return GripperResult(opening=float(info["opening"]), holding=bool(info["grasped"]), reason=reason)
+
+    async def stop_motion(self, msg: Message | None, ctx: QueryContext) -> Ok:
+        if isinstance(msg, Request) and msg.params.get("reset"):
+            self.arm.reset_estop()
+            return Ok(info={"estopped": False})
+        self.arm.estop()
+        return Ok(info={"estopped": True})
+
+    async def scene(self, msg: Message | None, ctx: QueryContext) -> Ok:
+        if not isinstance(msg, SceneRequest):
+            raise InvalidRequest("expected a SceneRequest", detail={"got": type(msg).__name__})
+        if float(np.max(msg.extent)) <= 0.0:
+            self.arm.collision.clear_object()
+        else:
+            self.arm.collision.set_object_box(msg.center, msg.extent, msg.yaw)
+        return Ok(info={"object_box": bool(np.max(msg.extent) > 0)})
+
+    async def state(self, msg: Message | None, ctx: QueryContext) -> JointState:
+        return self._joint_state()
+
+    async def teardown(self) -> None:
+        self.arm.estop()
+        await self.run_cpu(self.arm.close)
+
+    def health_info(self) -> dict[str, object]:
+        return {"backend": self.backend, "estopped": self.arm.estopped}
+
+
+def main() -> None:
+    p = service_arg_parser("objscan arm service (PAPRAS: pinocchio IK, Ruckig motion, collision checks)")
+    p.add_argument("--backend", choices=["sim", "dynamixel", "replay", "real"], default="sim")
+    p.add_argument("--port", default="/dev/ttyUSB0", help="dynamixel: serial port of the U2D2")
+    p.add_argument("--baud", type=int, default=1_000_000, help="dynamixel: bus baud rate")
+    p.add_argument("--session", help="replay: session folder whose recorded joints to report")
+    args = p.parse_args()
+    backend = "dynamixel" if args.backend == "real" else args.backend
+    run_service(lambda: ArmService(settings_from_args(args, backend=backend, port=args.port, baud=args.baud,
+                                                      session=args.session)))

@@ -1,0 +1,3 @@
+from services.sim.service import main
+
+main()

@@ -1,0 +1,113 @@
+"""The digital twin's Zenoh face (used only by the ``sim`` backends of camera and arm, and by tests).
+
+- ``sim/render`` (``CaptureRequest``) → ``RGBDFrame`` from the camera pose the arm last reported, with the
+  believed pose (profile errors) and the true one (ground truth).
+- ``sim/joints`` (``JointState`` with true TCP/camera poses) → ``Ok``: the arm's sim driver streams set-points
+  as requests, so they arrive in order and a move has reached the twin when the arm answers.
+- ``sim/gripper`` (``GripperRequest``) → ``GripperResult``: closing at the current TCP grasps (or not, and
+  why); opening sets a held object down with the profile's errors.
+- ``sim/world`` (``Request``, ``params.op``): ``state``, ``reset`` (object, profile, seed), ``force_slip``,
+  ``turn`` (by hand), ``gt_points`` (ground-truth surface samples in ``base``). Ground truth only.
+"""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+
+from common import keys
+from common.api import CaptureRequest, GripperRequest, GripperResult
+from common.codec import Message
+from common.errors import InvalidRequest
+from common.messages import JointState, Ok, Request, RGBDFrame
+from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from services.sim.sensor_model import d435_intrinsics
+from services.sim.world import World
+
+
+class SimService(Service):
+    name = "sim"
+
+    async def setup(self) -> None:
+        opts = self.settings.options
+        self.world = await self.run_cpu(World, opts.get("object", "milk"), profile=opts.get("profile", "ideal"),
+                                        seed=int(opts.get("seed", 0)))
+        self.seq = 0
+        self._world_lock = asyncio.Lock()
+        r = self.robot
+        self.queryable(keys.sim(r, "render"), self.render)
+        self.queryable(keys.sim(r, "joints"), self.joints)
+        self.queryable(keys.sim(r, "gripper"), self.gripper)
+        self.queryable(keys.sim(r, "world"), self.world_op)
+
+    async def render(self, msg: Message | None, ctx: QueryContext) -> RGBDFrame:
+        width = msg.width if isinstance(msg, CaptureRequest) and msg.width else 640
+        height = msg.height if isinstance(msg, CaptureRequest) and msg.height else 480
+        self.seq += 1
+        return await self.run_cpu(self.world.render_frame, None, d435_intrinsics(width, height), self.seq)
+
+    async def joints(self, msg: Message | None, ctx: QueryContext) -> Ok:
+        if not isinstance(msg, JointState):
+            raise InvalidRequest("expected a JointState", detail={"got": type(msg).__name__})
+        self.world.set_joint_state(msg.names, msg.position, T_base_gripper=msg.T_base_gripper,
+                                   T_base_camera=msg.T_base_camera)
+        return Ok()
+
+    async def gripper(self, msg: Message | None, ctx: QueryContext) -> GripperResult:
+        if not isinstance(msg, GripperRequest):
+            raise InvalidRequest("expected a GripperRequest", detail={"got": type(msg).__name__})
+        w = self.world
+        if msg.opening < w.gripper_opening - 1e-4 and not w.attached:
+            if w.T_base_gripper is None:
+                raise InvalidRequest("no TCP pose reported yet: move the arm before closing the gripper")
+            outcome = await self.run_cpu(w.close_gripper, w.T_base_gripper, msg.opening)
+            return GripperResult(opening=float(outcome.width), holding=bool(outcome.success), reason=outcome.reason)
+        if w.attached and msg.opening <= w.gripper_opening + 1e-4:
+            return GripperResult(opening=float(w.gripper_opening), holding=True, reason="already_holding")
+        released = await self.run_cpu(w.open_gripper, msg.opening)
+        return GripperResult(opening=float(w.gripper_opening), holding=False,
+                             reason="released" if released else "opened")
+
+    async def world_op(self, msg: Message | None, ctx: QueryContext) -> Message:
+        params = msg.params if isinstance(msg, Request) else {}
+        op = params.get("op", "state")
+        if op == "state":
+            return Ok(info=self.world.state())
+        if op == "reset":
+            async with self._world_lock:
+                w = self.world
+                obj = params.get("object", w.obj.name)
+                profile = params.get("profile", w.profile.name)
+                seed = int(params.get("seed", w.seed))
+                self.world = await self.run_cpu(World, obj, profile=profile, seed=seed)
+                self.seq = 0
+            return Ok(info=self.world.state())
+        if op == "force_slip":
+            self.world.force_next_grasp_slip()
+            return Ok(info={"armed": True})
+        if op == "turn":
+            achieved = self.world.turn_object(float(params.get("angle_deg", 30.0)))
+            return Ok(info={"achieved_turn_deg": achieved})
+        if op == "gt_points":
+            n = int(params.get("n", 50000))
+            pts = self.world.obj.gt_points(n)
+            T = self.world.true_object_pose()
+            xyz = pts @ T[:3, :3].T + T[:3, 3]
+            return Ok(info={"xyz": np.ascontiguousarray(xyz, dtype=np.float64), "T_base_object": T,
+                            "object": self.world.obj.name, "ground_truth": True})
+        raise InvalidRequest(f"unknown sim world op {op!r}",
+                             detail={"ops": ["state", "reset", "force_slip", "turn", "gt_points"]})
+
+    def health_info(self) -> dict[str, object]:
+        return {"object": self.world.obj.name, "profile": self.world.profile.name, "frames": self.seq}
+
+
+def main() -> None:
+    p = service_arg_parser("objscan digital twin (simulated table, object, arm, gripper and D435)")
+    p.add_argument("--object", default="milk", help="HOPE object name or a mesh path (default: %(default)s)")
+    p.add_argument("--profile", default="ideal", help="error profile: ideal | hand-turned | robot-turned")
+    p.add_argument("--seed", type=int, default=0)
+    args = p.parse_args()
+    run_service(lambda: SimService(settings_from_args(args, object=args.object, profile=args.profile,
+                                                      seed=args.seed)))
