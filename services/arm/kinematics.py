@@ -53,7 +53,7 @@ class KinematicsConfig:
     ik_max_iterations: int = 80  # per seed
     ik_damping: float = 1e-6
     ik_max_step: float = 0.4  # rad per iteration, keeps DLS from overshooting far from the target
-    ik_num_seeds: int = 16  # including the caller's q and the fixed postures
+    ik_num_seeds: int = 24  # including the caller's q and the fixed postures
     ik_max_solutions: int = 3  # converged solutions to compare before choosing the closest to q_init
     ik_random_seed: int = 7
     roll_gain: float = 0.5  # null-space pull of the free roll towards 0 (free_roll only)
