@@ -1,0 +1,97 @@
+"""The paper's four configurations and the automatic choice among them (beyond the paper).
+
+The paper compares regions on/off x crop (favour overlap) on/off, finds no clear winner and leaves the
+choice to a person ("run all four and choose the alignment with the highest fitness"). Here the
+choice is made from figures the pipeline can compute without ground truth:
+
+* the loop-closure error of the 12 pair transforms (rotation, and displacement of the object centre):
+  if every pair is right their composition around the loop is the identity, so a wrong pair shows;
+* the fitness of every neighbour pair *as posed in the final model* (including the loop edge), which
+  sees a misplaced view whatever the pair stage claimed.
+
+``consistency_score`` folds them into one number (higher is better). The ``staged`` strategy runs
+the configurations cheapest first and stops at the first whose loop closes and whose posed fitness
+is high; ``all`` runs all four and takes the best score. Either way the reason is reported.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from services.registration.dynamic.combine import CombineResult
+from services.registration.dynamic.pair import PairResult
+
+# name -> (regions, crop), cheapest first (the staged order)
+CONFIGURATIONS: dict[str, tuple[bool, bool]] = {
+    "no_region": (False, False),
+    "no_region_crop": (False, True),
+    "region": (True, False),
+    "region_crop": (True, True),
+}
+
+
+@dataclass(frozen=True)
+class AcceptCriteria:
+    """When the staged choice may stop: the loop closes and every neighbour fits as posed."""
+
+    max_loop_rotation_deg: float = 3.0
+    max_loop_translation_mm: float = 5.0
+    min_posed_fitness: float = 0.6
+
+
+@dataclass
+class ConfigurationOutcome:
+    """One configuration run end to end (pairs + combination) and its self-assessed figures."""
+
+    name: str
+    results: list[PairResult]
+    combined: CombineResult
+    loop: dict
+    consistency: dict
+    seconds: float
+    score: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+    def summary(self) -> dict:
+        return {"score": self.score, "loop_rotation_deg": self.loop["rotation_deg"],
+                "loop_translation_mm": self.loop["translation_mm"],
+                "mean_pair_fitness": sum(r.fitness for r in self.results) / len(self.results),
+                "mean_posed_fitness": self.consistency["mean_posed_fitness"],
+                "min_posed_fitness": self.consistency["min_posed_fitness"],
+                "mean_posed_rmse_mm": self.consistency["mean_posed_rmse_mm"],
+                "combine": self.combined.method, "dropped_edge": self.combined.dropped_edge,
+                "paths": [r.path for r in self.results], "seconds": self.seconds}
+
+
+def consistency_score(loop: dict, consistency: dict) -> float:
+    """Higher is better: posed fitness (mean and worst) minus loop-closure penalties.
+
+    Scale: 1° of loop rotation or 5 mm of loop displacement costs as much as 0.02 of fitness.
+    """
+    rot = loop["rotation_deg"] if loop["rotation_deg"] == loop["rotation_deg"] else 180.0
+    trans = loop["translation_mm"] if loop["translation_mm"] == loop["translation_mm"] else 1000.0
+    return (0.5 * consistency["mean_posed_fitness"] + 0.5 * consistency["min_posed_fitness"]
+            - 0.02 * rot - 0.004 * trans)
+
+
+def acceptable(outcome: ConfigurationOutcome, criteria: AcceptCriteria) -> bool:
+    return (outcome.loop["rotation_deg"] <= criteria.max_loop_rotation_deg
+            and outcome.loop["translation_mm"] <= criteria.max_loop_translation_mm
+            and outcome.consistency["min_posed_fitness"] >= criteria.min_posed_fitness)
+
+
+def describe(outcome: ConfigurationOutcome) -> str:
+    return (f"{outcome.name}: loop {outcome.loop['rotation_deg']:.2f}° / {outcome.loop['translation_mm']:.1f} mm, "
+            f"posed fitness mean {outcome.consistency['mean_posed_fitness']:.3f} "
+            f"min {outcome.consistency['min_posed_fitness']:.3f}, score {outcome.score:.3f}")
+
+
+def choose(outcomes: list[ConfigurationOutcome], criteria: AcceptCriteria,
+           staged: bool) -> tuple[ConfigurationOutcome, str]:
+    """Pick the configuration to keep and say why."""
+    if staged and len(outcomes) == 1 and acceptable(outcomes[0], criteria):
+        return outcomes[0], f"first configuration consistent, stopped there ({describe(outcomes[0])})"
+    best = max(outcomes, key=lambda o: o.score)
+    others = "; ".join(describe(o) for o in outcomes if o is not best)
+    verdict = "consistent" if acceptable(best, criteria) else "best available, NOT within acceptance"
+    return best, f"highest consistency score, {verdict} ({describe(best)}); others: {others or 'none'}"

@@ -1,0 +1,246 @@
+"""Top level of the dynamic stage: 12 isolated views in, one colored model out.
+
+``build_model(views, config, map_pairs=None, progress=None) -> ModelResult``
+
+1. pre-process (pre-rotate by the commanded turn, stack on the centres, quantise colors; regions
+   when a configuration needs them),
+2. for each configuration to try: make the 12 pair jobs and hand them to ``map_pairs`` (default:
+   sequential in this process; the registration service passes one that spreads them over its
+   workers), combine (pose graph by default, or the paper's drop-and-chain), measure consistency,
+3. choose the configuration (fixed, or automatic), fuse the views at ``model_voxel`` in the ``base``
+   coordinates of view 0.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import open3d as o3d
+
+from services.registration.dynamic.combine import (
+    CombineConfig,
+    combine_paper,
+    loop_closure_error,
+    pairwise_consistency,
+)
+from services.registration.dynamic.configurations import (
+    CONFIGURATIONS,
+    AcceptCriteria,
+    ConfigurationOutcome,
+    choose,
+    consistency_score,
+)
+from services.registration.dynamic.pair import PairConfig, PairJob, PairResult, register_pair
+from services.registration.dynamic.pose_graph import optimise_pose_graph
+from services.registration.dynamic.preprocess import (
+    Cloud,
+    Prepared,
+    PreprocessConfig,
+    attach_regions,
+    neighbour_edges,
+    preprocess,
+)
+from services.registration.dynamic.views import DynamicRegistrationError, DynamicView
+
+MapPairs = Callable[[list[PairJob]], list[PairResult]]
+Progress = Callable[[str, dict], None]
+
+
+@dataclass(frozen=True)
+class DynamicConfig:
+    """Everything the dynamic stage can be told; the defaults are the fast, autonomous pipeline.
+
+    ``configuration``: "auto" or one of ``CONFIGURATIONS`` (no_region, no_region_crop, region,
+    region_crop). ``auto_strategy``: "staged" (cheapest first, stop when consistent) or "all".
+    """
+
+    configuration: str = "auto"
+    auto_strategy: str = "staged"
+    pair: PairConfig = field(default_factory=PairConfig)
+    preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
+    combine: CombineConfig = field(default_factory=CombineConfig)
+    accept: AcceptCriteria = field(default_factory=AcceptCriteria)
+    model_voxel: float = 0.001
+
+    @classmethod
+    def paper(cls, configuration: str = "no_region", **pair_overrides) -> DynamicConfig:
+        """The paper's procedure: paper pair mode and the drop-lowest-fitness chain."""
+        return cls(configuration=configuration, pair=PairConfig(mode="paper", **pair_overrides),
+                   combine=CombineConfig(method="paper"))
+
+
+@dataclass
+class ModelResult:
+    """The model and everything needed to judge it without ground truth.
+
+    ``xyz``/``rgb``/``normals`` are in the ``base`` coordinates of view 0. ``T_model_view[k]`` maps
+    view k's ``base`` points into the model.
+    """
+
+    xyz: np.ndarray
+    rgb: np.ndarray
+    normals: np.ndarray
+    T_model_view: list[np.ndarray]
+    edges: list[PairResult]
+    loop_closure: dict
+    consistency: dict
+    configuration: str
+    reason: str
+    combine_method: str
+    dropped_edge: int | None
+    candidates: dict
+    timings: dict
+    voxel: float
+
+    def __len__(self) -> int:
+        return int(self.xyz.shape[0])
+
+    def to_o3d(self) -> o3d.geometry.PointCloud:
+        return Cloud(self.xyz, self.rgb, self.normals).to_o3d()
+
+    def write_ply(self, path: str | Path) -> Path:
+        """Binary PLY with colors and normals."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if not o3d.io.write_point_cloud(str(path), self.to_o3d(), write_ascii=False):
+            raise DynamicRegistrationError("could not write model PLY", code="io_error", detail={"path": str(path)})
+        return path
+
+    def to_json(self) -> dict:
+        """JSON-able report: configuration and why, per-edge figures, loop closure, timings."""
+        return {
+            "configuration": self.configuration,
+            "reason": self.reason,
+            "combine": self.combine_method,
+            "dropped_edge": self.dropped_edge,
+            "points": len(self),
+            "voxel_mm": 1000.0 * self.voxel,
+            "loop_closure": self.loop_closure,
+            "consistency": self.consistency,
+            "edges": [e.to_json() | {"detail": {}} for e in self.edges],
+            "T_model_view": [np.asarray(T).tolist() for T in self.T_model_view],
+            "candidates": self.candidates,
+            "timings": self.timings,
+        }
+
+    def dumps(self) -> str:
+        return json.dumps(self.to_json(), indent=2, default=float)
+
+
+def sequential_map(jobs: list[PairJob]) -> list[PairResult]:
+    """Default ``map_pairs``: run every job here, in order."""
+    return [register_pair(j) for j in jobs]
+
+
+def process_pool_map(workers: int) -> MapPairs:
+    """A ``map_pairs`` that runs jobs in ``workers`` local processes (for benchmarks and offline use)."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    def run(jobs: list[PairJob]) -> list[PairResult]:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            return list(pool.map(register_pair, jobs))
+
+    return run
+
+
+def make_pair_jobs(prep: Prepared, pair: PairConfig) -> list[PairJob]:
+    """The 12 neighbour pair jobs (view i+1 onto view i, and the 0 onto n-1 loop closure)."""
+    jobs = []
+    for k, (s, t) in enumerate(neighbour_edges(len(prep.views))):
+        vs, vt = prep.views[s], prep.views[t]
+        jobs.append(PairJob(
+            index=k, source_view=s, target_view=t, source=vs.reduced, target=vt.reduced,
+            center=prep.center, axis=prep.axis, config=replace(pair, seed=pair.seed + 1000 * k),
+            source_regions=vs.regions if pair.regions else [], target_regions=vt.regions if pair.regions else [],
+            region_pairs=prep.region_pairs.get((s, t), []) if pair.regions else []))
+    return jobs
+
+
+def run_configuration(prep: Prepared, name: str, config: DynamicConfig, map_pairs: MapPairs) -> ConfigurationOutcome:
+    """Pairs + combination + consistency for one named configuration."""
+    if name not in CONFIGURATIONS:
+        raise DynamicRegistrationError(f"unknown configuration {name!r}", code="bad_value",
+                                       detail={"configurations": sorted(CONFIGURATIONS)})
+    t0 = time.perf_counter()
+    regions, crop = CONFIGURATIONS[name]
+    if regions:
+        attach_regions(prep, config.preprocess)
+    pair_cfg = replace(config.pair, regions=regions, crop=crop)
+    jobs = make_pair_jobs(prep, pair_cfg)
+    results = sorted(map_pairs(jobs), key=lambda r: r.index)
+    if len(results) != len(jobs):
+        raise DynamicRegistrationError("map_pairs returned the wrong number of results", code="bad_workers",
+                                       detail={"jobs": len(jobs), "results": len(results)})
+    t_pairs = time.perf_counter() - t0
+    if config.combine.method == "pose_graph":
+        combined = optimise_pose_graph(prep, results, config.combine)
+    elif config.combine.method == "paper":
+        combined = combine_paper(prep, results, config.combine)
+    else:
+        raise DynamicRegistrationError(f"unknown combine method {config.combine.method!r}", code="bad_value")
+    loop = loop_closure_error(results, prep.center)
+    consistency = pairwise_consistency(prep, combined.poses, results, config.combine)
+    out = ConfigurationOutcome(name, results, combined, loop, consistency, time.perf_counter() - t0,
+                               extra={"pairs_seconds": t_pairs})
+    out.score = consistency_score(loop, consistency)
+    return out
+
+
+def fuse(views: list[DynamicView], T_model_view: list[np.ndarray], voxel: float) -> Cloud:
+    """All views in the model frame, merged on a ``voxel`` grid (colors and normals averaged)."""
+    pcd = o3d.geometry.PointCloud()
+    for v, T in zip(views, T_model_view, strict=True):
+        nrm = v.normals if v.normals is not None else np.zeros_like(v.xyz)
+        pcd += Cloud(np.asarray(v.xyz, np.float32), np.asarray(v.rgb, np.uint8),
+                     np.asarray(nrm, np.float32)).transformed(T).to_o3d()
+    if voxel > 0:
+        pcd = pcd.voxel_down_sample(voxel)
+    if any(v.normals is None for v in views):
+        pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=max(4 * voxel, 0.004), max_nn=30))
+    return Cloud.from_o3d(pcd)
+
+
+def build_model(views: list[DynamicView], config: DynamicConfig | None = None,
+                map_pairs: MapPairs | None = None, progress: Progress | None = None) -> ModelResult:
+    """Register the views into one colored model; see the module doc."""
+    cfg = config or DynamicConfig()
+    run = map_pairs or sequential_map
+    say = progress or (lambda stage, info: None)
+    t0 = time.perf_counter()
+    prep = preprocess(views, cfg.preprocess)
+    say("preprocessed", {"views": len(views), "seconds": prep.seconds})
+    if cfg.configuration == "auto":
+        names = list(CONFIGURATIONS)
+    elif cfg.configuration in CONFIGURATIONS:
+        names = [cfg.configuration]
+    else:
+        raise DynamicRegistrationError(f"unknown configuration {cfg.configuration!r}", code="bad_value",
+                                       detail={"configurations": ["auto", *CONFIGURATIONS]})
+    staged = cfg.configuration == "auto" and cfg.auto_strategy == "staged"
+    outcomes: list[ConfigurationOutcome] = []
+    for name in names:
+        outcome = run_configuration(prep, name, cfg, run)
+        outcomes.append(outcome)
+        say("configuration", {"name": name, **outcome.summary()})
+        if staged and len(outcomes) == 1 and choose(outcomes, cfg.accept, True)[1].startswith("first"):
+            break
+    if len(outcomes) == 1 and cfg.configuration != "auto":
+        chosen, reason = outcomes[0], f"fixed by configuration ({cfg.configuration})"
+    else:
+        chosen, reason = choose(outcomes, cfg.accept, staged)
+    t_fuse = time.perf_counter()
+    T_model_view = [P @ pv.T_stack_view for P, pv in zip(chosen.combined.poses, prep.views, strict=True)]
+    model = fuse(views, T_model_view, cfg.model_voxel)
+    timings = {"preprocess_s": prep.seconds,
+               **{f"{o.name}_s": o.seconds for o in outcomes},
+               "fuse_s": time.perf_counter() - t_fuse, "total_s": time.perf_counter() - t0}
+    say("done", {"configuration": chosen.name, "seconds": timings["total_s"]})
+    return ModelResult(model.xyz, model.rgb, model.normals, T_model_view, chosen.results, chosen.loop,
+                       chosen.consistency, chosen.name, reason, chosen.combined.method,
+                       chosen.combined.dropped_edge, {o.name: o.summary() for o in outcomes}, timings,
+                       cfg.model_voxel)

@@ -1,0 +1,423 @@
+"""Registration of one neighbour pair (paper II-C-2), as a pure function of picklable inputs.
+
+``register_pair(job) -> PairResult`` takes only numpy arrays and frozen dataclasses, so a pair job can
+run in another process or on another machine (the registration service spreads them over workers).
+The returned ``T`` maps the (pre-processed) source view onto the (pre-processed) target view.
+
+Two paths:
+
+* ``mode="paper"``: the paper's procedure. 5 attempts, keeping the best fitness. Each attempt registers
+  the color-reduced clouds, the top 3 region pairs (``regions`` on) and the clouds cropped to their
+  expected overlap (``crop`` on), each with a global stage (3 runs at 8 mm with overlaps 0.9/0.85/0.8,
+  best kept) and a local stage (voxels 8/4.5/1 mm with overlap multipliers 3/2/1: color ICP, then
+  non-overlap removal and GICP; more than 2 color-ICP failures discard the candidate; then a final color
+  ICP and point-to-plane at 1 mm).
+* ``mode="fast"`` (default, beyond the paper): pre-rotation already puts the views within the turn
+  error (±5-15°) of each other, so local registration from that prior is tried first, from a few yaw
+  hypotheses about the turn axis, and verified; the global stage only runs when verification fails.
+  The result says which path won (``path``).
+
+Candidates are scored by fitness (open3d's definition: inlier source points / source points, inlier
+distance ``fitness_distance``) on the full reduced clouds, or on the cropped clouds when ``crop``
+(favour overlap) is on. A color-aware fitness (inliers whose quantised color also matches) breaks the
+tie that geometry leaves on symmetric objects (cans); both are reported.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import open3d as o3d
+from scipy.spatial import cKDTree
+
+from common.geometry import rotation_about_line
+from services.registration.dynamic.preprocess import Cloud
+
+reg = o3d.pipelines.registration
+
+
+@dataclass(frozen=True)
+class PairConfig:
+    """Pair registration settings; paper values where the paper gives them."""
+
+    mode: str = "fast"  # "fast" | "paper"
+    regions: bool = False
+    crop: bool = False
+    attempts: int = 5
+    global_method: str = "auto"  # "auto" (4pcs when available, else fpfh_ransac) | "4pcs" | "fpfh_ransac" | "fgr"
+    global_voxel: float = 0.008
+    overlaps: tuple[float, ...] = (0.9, 0.85, 0.8)
+    local_voxels: tuple[float, ...] = (0.008, 0.0045, 0.001)
+    multipliers: tuple[float, ...] = (3.0, 2.0, 1.0)
+    final_voxel: float = 0.001
+    max_color_icp_failures: int = 2
+    icp_iterations: int = 30
+    # fast path
+    fast_voxels: tuple[float, ...] = (0.006, 0.003, 0.002)
+    fast_max_corr_factor: tuple[float, ...] = (2.5, 2.0, 1.5)
+    yaw_hypotheses_deg: tuple[float, ...] = (0.0, -12.0, 12.0)
+    accept_fitness: float = 0.55  # verification of the prior path (fitness on the evaluation clouds)
+    accept_rmse: float = 0.0018
+    fast_point_to_plane: bool = False  # a last point-to-plane pass: ~+30 % time, no gain measured on sim
+    # scoring
+    eval_voxel: float = 0.002
+    fitness_distance: float = 0.003
+    crop_angle_deg: float = 4.0  # unit-sphere overlap: a direction counts as shared within this angle
+    seed: int = 0
+
+
+@dataclass
+class PairJob:
+    """Everything one pair registration needs; picklable (numpy + frozen dataclasses)."""
+
+    index: int
+    source_view: int
+    target_view: int
+    source: Cloud
+    target: Cloud
+    center: np.ndarray
+    axis: np.ndarray
+    config: PairConfig = field(default_factory=PairConfig)
+    source_regions: list[Cloud] = field(default_factory=list)
+    target_regions: list[Cloud] = field(default_factory=list)
+    region_pairs: list[tuple[int, int]] = field(default_factory=list)
+    prior: np.ndarray = field(default_factory=lambda: np.eye(4))
+
+
+@dataclass
+class PairResult:
+    """Outcome of one pair: ``T`` maps source onto target; fitness/rmse on the scoring clouds."""
+
+    index: int
+    source_view: int
+    target_view: int
+    T: np.ndarray
+    fitness: float
+    rmse: float
+    color_fitness: float
+    path: str  # "prior" | "global" | "paper" | "failed"
+    candidate: str  # "full" | "crop" | "region0".. : which clouds gave the winning transform
+    seconds: float
+    attempts: int = 0
+    color_icp_failures: int = 0
+    detail: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        return {"index": self.index, "source_view": self.source_view, "target_view": self.target_view,
+                "T": np.asarray(self.T).tolist(), "fitness": self.fitness, "rmse_mm": 1000.0 * self.rmse,
+                "color_fitness": self.color_fitness, "path": self.path, "candidate": self.candidate,
+                "seconds": self.seconds, "attempts": self.attempts,
+                "color_icp_failures": self.color_icp_failures, "detail": self.detail}
+
+
+# ----------------------------------------------------------------------------------------- scoring
+
+@dataclass
+class _Scorer:
+    """Fitness of a transform on fixed evaluation clouds (KD-tree on the target built once)."""
+
+    source: Cloud
+    target: Cloud
+    distance: float
+    tree: cKDTree = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.tree = cKDTree(self.target.xyz.astype(np.float64))
+
+    def __call__(self, T: np.ndarray) -> tuple[float, float, float]:
+        """(fitness, inlier rmse, color fitness) of ``T`` applied to the source."""
+        if len(self.source) == 0 or len(self.target) == 0:
+            return 0.0, np.inf, 0.0
+        pts = self.source.xyz.astype(np.float64) @ T[:3, :3].T + T[:3, 3]
+        d, j = self.tree.query(pts, k=1, distance_upper_bound=self.distance)
+        inl = np.isfinite(d)
+        n_in = int(inl.sum())
+        if n_in == 0:
+            return 0.0, np.inf, 0.0
+        same = np.all(self.source.rgb[inl] == self.target.rgb[j[inl]], axis=1)
+        return n_in / len(pts), float(np.sqrt(np.mean(d[inl] ** 2))), float(same.sum()) / len(pts)
+
+
+def _score_key(f: float, cf: float) -> float:
+    """One number to rank candidates: geometric fitness, with color agreement as a tie-breaker."""
+    return f + 0.5 * cf
+
+
+# ----------------------------------------------------------------------------------------- helpers
+
+def crop_to_overlap(source: Cloud, target: Cloud, center: np.ndarray, T: np.ndarray,
+                    angle_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of source and target points in their expected overlap (paper: unit-sphere projection).
+
+    Both clouds are centred on ``center`` and projected onto the unit sphere (the source after ``T``);
+    a point is kept if the other cloud has a direction within ``angle_deg`` of its own.
+    """
+    c = np.asarray(center, dtype=np.float64)
+    ps = source.xyz.astype(np.float64) @ T[:3, :3].T + T[:3, 3] - c
+    pt = target.xyz.astype(np.float64) - c
+    us = ps / np.maximum(np.linalg.norm(ps, axis=1, keepdims=True), 1e-9)
+    ut = pt / np.maximum(np.linalg.norm(pt, axis=1, keepdims=True), 1e-9)
+    chord = 2.0 * np.sin(np.radians(angle_deg) / 2.0)
+    ds, _ = cKDTree(ut).query(us, k=1, distance_upper_bound=chord)
+    dt, _ = cKDTree(us).query(ut, k=1, distance_upper_bound=chord)
+    return np.flatnonzero(np.isfinite(ds)), np.flatnonzero(np.isfinite(dt))
+
+
+def _down(cloud: Cloud, voxel: float) -> o3d.geometry.PointCloud:
+    pcd = cloud.to_o3d()
+    if voxel > 0:
+        pcd = pcd.voxel_down_sample(voxel)
+    pcd.normalize_normals()
+    return pcd
+
+
+def _colored_icp(s: o3d.geometry.PointCloud, t: o3d.geometry.PointCloud, max_corr: float, T: np.ndarray,
+                 iters: int) -> tuple[np.ndarray, bool]:
+    """Color ICP; returns (T, ok). A failure (no correspondences, exception) keeps the input ``T``."""
+    try:
+        r = reg.registration_colored_icp(
+            s, t, max_corr, T, reg.TransformationEstimationForColoredICP(lambda_geometric=0.968),
+            reg.ICPConvergenceCriteria(relative_fitness=1e-6, relative_rmse=1e-6, max_iteration=iters))
+    except RuntimeError:
+        return T, False
+    if r.fitness <= 0.0 or not np.isfinite(r.transformation).all():
+        return T, False
+    return np.asarray(r.transformation), True
+
+
+def _point_to_plane(s: o3d.geometry.PointCloud, t: o3d.geometry.PointCloud, max_corr: float, T: np.ndarray,
+                    iters: int) -> np.ndarray:
+    r = reg.registration_icp(s, t, max_corr, T, reg.TransformationEstimationPointToPlane(),
+                             reg.ICPConvergenceCriteria(relative_fitness=1e-6, relative_rmse=1e-6,
+                                                        max_iteration=iters))
+    return np.asarray(r.transformation) if r.fitness > 0 else T
+
+
+def _overlap_only(s: o3d.geometry.PointCloud, t: o3d.geometry.PointCloud, T: np.ndarray,
+                  multiplier: float) -> tuple[o3d.geometry.PointCloud, o3d.geometry.PointCloud]:
+    """Drop points with no partner within ``multiplier`` x the target's mean nearest-neighbour spacing."""
+    spacing = float(np.mean(np.asarray(t.compute_nearest_neighbor_distance()))) if len(t.points) > 1 else 0.0
+    radius = max(multiplier * spacing, 1e-4)
+    ps = np.asarray(s.points) @ T[:3, :3].T + T[:3, 3]
+    pt = np.asarray(t.points)
+    ds, _ = cKDTree(pt).query(ps, k=1, distance_upper_bound=radius)
+    dt, _ = cKDTree(ps).query(pt, k=1, distance_upper_bound=radius)
+    return s.select_by_index(np.flatnonzero(np.isfinite(ds))), t.select_by_index(np.flatnonzero(np.isfinite(dt)))
+
+
+def _gicp(s: o3d.geometry.PointCloud, t: o3d.geometry.PointCloud, max_corr: float, T: np.ndarray,
+          iters: int) -> np.ndarray:
+    if len(s.points) < 10 or len(t.points) < 10:
+        return T
+    try:
+        r = reg.registration_generalized_icp(
+            s, t, max_corr, T, reg.TransformationEstimationForGeneralizedICP(),
+            reg.ICPConvergenceCriteria(relative_fitness=1e-6, relative_rmse=1e-6, max_iteration=iters))
+    except RuntimeError:
+        return T
+    return np.asarray(r.transformation) if r.fitness > 0 and np.isfinite(r.transformation).all() else T
+
+
+def global_align(source: Cloud, target: Cloud, voxel: float, overlap: float, seed: int,
+                 method: str = "auto") -> tuple[np.ndarray, float, str]:
+    """Global registration behind one call: (T, score, method used).
+
+    Uses part A's ``global_registration.global_register`` (4PCS, FPFH-RANSAC, FGR) when it is present;
+    until then, and for ``fpfh_ransac`` when it is not, open3d's FPFH-RANSAC directly.
+    """
+    try:
+        from services.registration.dynamic.global_registration import global_register
+    except ImportError:
+        global_register = None
+    if global_register is not None:
+        m = "4pcs" if method == "auto" else method
+        res = global_register(source.xyz, target.xyz, method=m, voxel=voxel, overlap=overlap, seed=seed)
+        return np.asarray(res.T, dtype=float), float(res.lcp_score), m
+    return _fpfh_ransac(source, target, voxel, seed) + ("fpfh_ransac",)
+
+
+def _fpfh_ransac(source: Cloud, target: Cloud, voxel: float, seed: int) -> tuple[np.ndarray, float]:
+    o3d.utility.random.seed(int(seed) & 0x7FFFFFFF)
+    s, t = _down(source, voxel), _down(target, voxel)
+    if len(s.points) < 10 or len(t.points) < 10:
+        return np.eye(4), 0.0
+    param = o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)
+    fs = reg.compute_fpfh_feature(s, param)
+    ft = reg.compute_fpfh_feature(t, param)
+    dist = 1.5 * voxel
+    r = reg.registration_ransac_based_on_feature_matching(
+        s, t, fs, ft, True, dist, reg.TransformationEstimationPointToPoint(False), 3,
+        [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)],
+        reg.RANSACConvergenceCriteria(50_000, 0.999))
+    return np.asarray(r.transformation), float(r.fitness)
+
+
+# ----------------------------------------------------------------------------------------- local stages
+
+def paper_local(source: Cloud, target: Cloud, T0: np.ndarray, cfg: PairConfig) -> tuple[np.ndarray | None, int]:
+    """The paper's local stage from a global estimate; (T or None if discarded, color-ICP failures)."""
+    T = T0
+    fails = 0
+    for voxel, mult in zip(cfg.local_voxels, cfg.multipliers, strict=True):
+        s, t = _down(source, voxel), _down(target, voxel)
+        T, ok = _colored_icp(s, t, 1.5 * voxel, T, cfg.icp_iterations)
+        fails += 0 if ok else 1
+        if fails > cfg.max_color_icp_failures:
+            return None, fails
+        so, to = _overlap_only(s, t, T, mult)
+        T = _gicp(so, to, 1.5 * voxel, T, cfg.icp_iterations)
+    s, t = _down(source, cfg.final_voxel), _down(target, cfg.final_voxel)
+    T, ok = _colored_icp(s, t, 1.5 * cfg.final_voxel, T, cfg.icp_iterations)
+    fails += 0 if ok else 1
+    if fails > cfg.max_color_icp_failures:
+        return None, fails
+    T = _point_to_plane(s, t, 1.5 * cfg.final_voxel, T, cfg.icp_iterations)
+    return T, fails
+
+
+def fast_local(source: Cloud, target: Cloud, T0: np.ndarray, cfg: PairConfig) -> tuple[np.ndarray, int]:
+    """Coarse-to-fine color ICP then point-to-plane from ``T0``; (T, color-ICP failures)."""
+    T = T0
+    fails = 0
+    for voxel, k in zip(cfg.fast_voxels, cfg.fast_max_corr_factor, strict=True):
+        s, t = _down(source, voxel), _down(target, voxel)
+        T, ok = _colored_icp(s, t, k * voxel, T, cfg.icp_iterations)
+        fails += 0 if ok else 1
+    if cfg.fast_point_to_plane:
+        T = _point_to_plane(s, t, cfg.fast_voxels[-1], T, cfg.icp_iterations)
+    return T, fails
+
+
+# ----------------------------------------------------------------------------------------- the pair
+
+@dataclass
+class _Candidate:
+    name: str
+    source: Cloud
+    target: Cloud
+
+
+def _candidates(job: PairJob, cfg: PairConfig) -> list[_Candidate]:
+    out = [_Candidate("full", job.source, job.target)]
+    if cfg.crop:
+        i_s, i_t = crop_to_overlap(job.source, job.target, job.center, job.prior, cfg.crop_angle_deg)
+        if len(i_s) > 50 and len(i_t) > 50:
+            out.append(_Candidate("crop", job.source.subset(i_s), job.target.subset(i_t)))
+    if cfg.regions:
+        for k, (a, b) in enumerate(job.region_pairs):
+            if a < len(job.source_regions) and b < len(job.target_regions):
+                out.append(_Candidate(f"region{k}", job.source_regions[a], job.target_regions[b]))
+    return out
+
+
+def _evaluation_clouds(job: PairJob, cfg: PairConfig) -> _Scorer:
+    src = job.source.downsampled(cfg.eval_voxel)
+    tgt = job.target.downsampled(cfg.eval_voxel)
+    if cfg.crop:  # favour overlap: score on the expected overlap only
+        i_s, i_t = crop_to_overlap(src, tgt, job.center, job.prior, cfg.crop_angle_deg)
+        if len(i_s) > 50 and len(i_t) > 50:
+            src, tgt = src.subset(i_s), tgt.subset(i_t)
+    return _Scorer(src, tgt, cfg.fitness_distance)
+
+
+def register_pair(job: PairJob) -> PairResult:
+    """Register ``job.source`` onto ``job.target``; see the module doc for the two paths."""
+    t0 = time.perf_counter()
+    cfg = job.config
+    if len(job.source) < 50 or len(job.target) < 50:
+        from services.registration.dynamic.views import DynamicRegistrationError
+
+        raise DynamicRegistrationError("pair clouds too small to register", code="empty_view",
+                                       detail={"pair": job.index, "source": len(job.source),
+                                               "target": len(job.target)})
+    scorer = _evaluation_clouds(job, cfg)
+    if cfg.mode == "paper":
+        res = _register_paper(job, cfg, scorer)
+    elif cfg.mode == "fast":
+        res = _register_fast(job, cfg, scorer)
+    else:
+        from services.registration.dynamic.views import DynamicRegistrationError
+
+        raise DynamicRegistrationError(f"unknown pair mode {cfg.mode!r}", code="bad_value",
+                                       detail={"modes": ["fast", "paper"]})
+    res.seconds = time.perf_counter() - t0
+    return res
+
+
+def _yaw(job: PairJob, deg: float) -> np.ndarray:
+    return rotation_about_line(job.axis, job.center, np.radians(deg))
+
+
+def _register_fast(job: PairJob, cfg: PairConfig, scorer: _Scorer) -> PairResult:
+    best: tuple[float, np.ndarray, str, tuple[float, float, float]] | None = None
+    fails_total = 0
+    tried: list[dict] = []
+    for cand in _candidates(job, cfg):
+        # coarse color ICP from each yaw hypothesis, keep the best, then refine it
+        voxel, k = cfg.fast_voxels[0], cfg.fast_max_corr_factor[0]
+        s, t = _down(cand.source, voxel), _down(cand.target, voxel)
+        coarse = []
+        for h in cfg.yaw_hypotheses_deg:
+            T, ok = _colored_icp(s, t, k * voxel, _yaw(job, h) @ job.prior, cfg.icp_iterations)
+            f, _, cf = scorer(T)
+            coarse.append((_score_key(f, cf), T))
+        T0 = max(coarse, key=lambda x: x[0])[1]
+        T, fails = fast_local(cand.source, cand.target, T0, cfg)
+        fails_total += fails
+        sc = scorer(T)
+        tried.append({"candidate": cand.name, "fitness": sc[0], "color_fitness": sc[2]})
+        key = _score_key(sc[0], sc[2])
+        if best is None or key > best[0]:
+            best = (key, T, cand.name, sc)
+    assert best is not None
+    _, T, name, (f, rmse, cf) = best
+    path = "prior"
+    if f < cfg.accept_fitness or rmse > cfg.accept_rmse:
+        # verification failed: global stage from scratch, then the same local refinement
+        rng = np.random.default_rng(cfg.seed + 7919 * job.index)
+        for overlap in cfg.overlaps:
+            Tg, _, method = global_align(job.source, job.target, cfg.global_voxel, overlap,
+                                         int(rng.integers(1 << 30)), cfg.global_method)
+            Tl, fails = fast_local(job.source, job.target, Tg, cfg)
+            fails_total += fails
+            sc = scorer(Tl)
+            tried.append({"candidate": f"global_{method}_{overlap}", "fitness": sc[0], "color_fitness": sc[2]})
+            if _score_key(sc[0], sc[2]) > best[0]:
+                best = (_score_key(sc[0], sc[2]), Tl, "full", sc)
+                path = "global"
+        _, T, name, (f, rmse, cf) = best
+    return PairResult(job.index, job.source_view, job.target_view, T, f, rmse, cf, path, name, 0.0,
+                      attempts=1, color_icp_failures=fails_total, detail={"tried": tried})
+
+
+def _register_paper(job: PairJob, cfg: PairConfig, scorer: _Scorer) -> PairResult:
+    rng = np.random.default_rng(cfg.seed + 7919 * job.index)
+    best: tuple[float, np.ndarray, str, tuple[float, float, float]] | None = None
+    fails_total = 0
+    tried: list[dict] = []
+    for attempt in range(cfg.attempts):
+        for cand in _candidates(job, cfg):
+            glob = []
+            for overlap in cfg.overlaps:
+                Tg, _, method = global_align(cand.source, cand.target, cfg.global_voxel, overlap,
+                                             int(rng.integers(1 << 30)), cfg.global_method)
+                glob.append((scorer(Tg)[0], Tg))
+            Tg = max(glob, key=lambda x: x[0])[1]
+            T, fails = paper_local(cand.source, cand.target, Tg, cfg)
+            fails_total += fails
+            if T is None:
+                tried.append({"attempt": attempt, "candidate": cand.name, "discarded": True})
+                continue
+            sc = scorer(T)
+            tried.append({"attempt": attempt, "candidate": cand.name, "fitness": sc[0]})
+            if best is None or sc[0] > best[0]:
+                best = (sc[0], T, cand.name, sc)
+    if best is None:
+        return PairResult(job.index, job.source_view, job.target_view, np.asarray(job.prior), 0.0, np.inf,
+                          0.0, "failed", "none", 0.0, attempts=cfg.attempts, color_icp_failures=fails_total,
+                          detail={"tried": tried})
+    _, T, name, (f, rmse, cf) = best
+    return PairResult(job.index, job.source_view, job.target_view, T, f, rmse, cf, "paper", name, 0.0,
+                      attempts=cfg.attempts, color_icp_failures=fails_total, detail={"tried": tried})
