@@ -165,8 +165,8 @@ class SimObject:
     def surface_colors(self, triangle_ids: np.ndarray, bary: np.ndarray) -> np.ndarray:
         """True surface colour (uint8 RGB) at points given by triangle ids and barycentrics (u, v).
 
-        Textures are sampled bilinearly through the triangle's UVs (repeat wrapping, OBJ convention:
-        v = 0 is the bottom row of the image); vertex colours are interpolated.
+        Textures are sampled bilinearly through the triangle's UVs (OBJ convention: v = 0 is the bottom
+        row of the image; clamped at the image edge, repeated outside [0, 1]); vertex colours are interpolated.
         """
         tri = np.asarray(triangle_ids, dtype=np.int64)
         bary = np.asarray(bary, dtype=np.float32)
@@ -200,18 +200,23 @@ class SimObject:
 
 
 def _bilinear(tex: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Bilinear texture lookup with repeat wrapping; uv in OBJ convention (v up)."""
+    """Bilinear texture lookup; uv in OBJ convention (v up). Coordinates outside [0, 1] repeat, texels are
+    clamped at the image edge (atlases must not bleed across their border)."""
     h, w = tex.shape[:2]
-    x = (uv[:, 0] - np.floor(uv[:, 0])) * w - 0.5
-    y = (1.0 - (uv[:, 1] - np.floor(uv[:, 1]))) * h - 0.5
+    u = np.where((uv[:, 0] < 0) | (uv[:, 0] > 1), uv[:, 0] - np.floor(uv[:, 0]), uv[:, 0])
+    v = np.where((uv[:, 1] < 0) | (uv[:, 1] > 1), uv[:, 1] - np.floor(uv[:, 1]), uv[:, 1])
+    x = u * w - 0.5
+    y = (1.0 - v) * h - 0.5
     x0 = np.floor(x)
     y0 = np.floor(y)
     fx = (x - x0)[:, None]
     fy = (y - y0)[:, None]
-    x0 = x0.astype(np.int64) % w
-    y0 = y0.astype(np.int64) % h
-    x1 = (x0 + 1) % w
-    y1 = (y0 + 1) % h
+    x0 = x0.astype(np.int64)
+    y0 = y0.astype(np.int64)
+    x1 = np.clip(x0 + 1, 0, w - 1)
+    y1 = np.clip(y0 + 1, 0, h - 1)
+    x0 = np.clip(x0, 0, w - 1)
+    y0 = np.clip(y0, 0, h - 1)
     t = tex.astype(np.float32, copy=False) if tex.dtype == np.float32 else tex
     c = ((t[y0, x0] * (1 - fx) + t[y0, x1] * fx) * (1 - fy)
          + (t[y1, x0] * (1 - fx) + t[y1, x1] * fx) * fy)

@@ -180,18 +180,20 @@ def _compose(t_hit, gids, prims, bary, normals, dirs, origin, obj_gid, tab_gid, 
             if mode == 0:
                 su = w0 * tri_uvs[p, 0, 0] + u * tri_uvs[p, 1, 0] + v * tri_uvs[p, 2, 0]
                 sv = w0 * tri_uvs[p, 0, 1] + u * tri_uvs[p, 1, 1] + v * tri_uvs[p, 2, 1]
-                su -= np.floor(su)
-                sv -= np.floor(sv)
+                if su < 0.0 or su > 1.0:  # repeat outside [0, 1], clamp to the edge inside (atlases)
+                    su -= np.floor(su)
+                if sv < 0.0 or sv > 1.0:
+                    sv -= np.floor(sv)
                 x = su * tw - 0.5
                 y = (1.0 - sv) * th - 0.5
                 x0 = int(np.floor(x))
                 y0 = int(np.floor(y))
                 fx = x - x0
                 fy = y - y0
-                x0 %= tw
-                y0 %= th
-                x1 = (x0 + 1) % tw
-                y1 = (y0 + 1) % th
+                x1 = min(max(x0 + 1, 0), tw - 1)
+                y1 = min(max(y0 + 1, 0), th - 1)
+                x0 = min(max(x0, 0), tw - 1)
+                y0 = min(max(y0, 0), th - 1)
                 a00 = (1 - fx) * (1 - fy)
                 a01 = fx * (1 - fy)
                 a10 = (1 - fx) * fy

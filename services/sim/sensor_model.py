@@ -98,28 +98,41 @@ def d435_intrinsics(width: int = 640, height: int = 480) -> Intrinsics:
 
 
 def depth_edges(depth_m: np.ndarray, threshold_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Edge mask of valid pixels next to a jump > ``threshold_m`` (or next to no data), and the farthest
-    neighbouring depth (what a flying pixel blends towards)."""
+    """Edge pixels and what a flying pixel there blends towards.
+
+    Returns (edges, target): ``edges`` marks valid pixels with a 4-neighbour more than ``threshold_m``
+    nearer or farther, or with a neighbour without data; ``target`` is the depth across the largest jump
+    (0 where the only "jump" is to a pixel without data: nothing to blend with).
+    """
     h, w = depth_m.shape
     pad = np.pad(depth_m, 1, mode="edge")
     neighbours = np.stack([pad[0:h, 1:w + 1], pad[2:h + 2, 1:w + 1], pad[1:h + 1, 0:w], pad[1:h + 1, 2:w + 2]])
     valid = depth_m > 0
     far = neighbours.max(axis=0)
     near = np.where(neighbours > 0, neighbours, np.inf).min(axis=0)
-    jump = (far - depth_m > threshold_m) | (depth_m - near > threshold_m) | (neighbours <= 0).any(axis=0)
-    return valid & jump, far
+    far_jump = far - depth_m
+    near_jump = np.where(np.isfinite(near), depth_m - near, 0.0)
+    target = np.where(far_jump >= near_jump, far, near)
+    has_target = valid & (np.maximum(far_jump, near_jump) > threshold_m)
+    hole = (neighbours <= 0).any(axis=0)
+    return valid & (has_target | hole), np.where(has_target, target, 0.0).astype(np.float32)
 
 
 def _edge_artifacts(depth: np.ndarray, noise: D435Noise, rng: np.random.Generator) -> None:
-    """Flying pixels and dropouts at depth discontinuities, in place."""
-    edges, far = depth_edges(depth, noise.edge_threshold_m)
+    """Flying pixels and dropouts at depth discontinuities, in place.
+
+    An edge pixel becomes a flying pixel (a blend of the two surfaces, on either side of the edge) with
+    ``flying_pixel_prob``, else drops out with ``edge_dropout_prob``; a pixel next to a hole has nothing
+    to blend with and can only drop out.
+    """
+    edges, target = depth_edges(depth, noise.edge_threshold_m)
     u = noise_field("uniform", depth.shape, rng)
-    # an edge pixel next to a hole has nothing to blend with: it can only drop out
-    fly = edges & (u < noise.flying_pixel_prob) & (far > depth)
+    fly = edges & (u < noise.flying_pixel_prob) & (target > 0)
     drop = edges & ~fly & (u < noise.flying_pixel_prob + noise.edge_dropout_prob)
+    drop &= (u >= noise.flying_pixel_prob) | (target <= 0)
     if fly.any():
         t = rng.random(int(fly.sum()), dtype=np.float32)
-        depth[fly] = depth[fly] + t * (far[fly] - depth[fly])
+        depth[fly] = depth[fly] + t * (target[fly] - depth[fly])
     depth[drop] = 0.0
 
 
