@@ -32,6 +32,9 @@ def fit_circle_2d(points: np.ndarray, refine_iterations: int = 5) -> CircleFit |
     if scale < 1e-12:
         return None
     q = q / scale
+    sv = np.linalg.svd(q, compute_uv=False)
+    if sv[-1] < 1e-6 * sv[0]:  # collinear: a circle of infinite radius
+        return None
     # Kåsa: x² + y² + D x + E y + F = 0, linear in (D, E, F)
     A = np.column_stack([q, np.ones(len(q))])
     b = -(q**2).sum(axis=1)
@@ -64,7 +67,8 @@ def fit_circle_2d(points: np.ndarray, refine_iterations: int = 5) -> CircleFit |
 
 def estimate_object_center(local_points: np.ndarray, extents: np.ndarray, slice_thickness: float,
                            n_slices: int, min_points: int, rng: np.random.Generator,
-                           max_points_per_slice: int = 400) -> tuple[np.ndarray, int]:
+                           max_points_per_slice: int = 400, end_margin: float = 0.1
+                           ) -> tuple[np.ndarray, int]:
     """Mean of circle centres fitted to random yz-slices of an axis-aligned cloud.
 
     ``local_points`` are in the object's box frame (x = main axis, centred on the box); ``extents`` the
@@ -72,7 +76,7 @@ def estimate_object_center(local_points: np.ndarray, extents: np.ndarray, slice_
     box's yz diagonal): a near-flat slice fits a huge circle far away. Returns (centre in the box
     frame, number of slices used); with no usable slice, the box centre (0, 0, 0) and 0.
     """
-    half_x = 0.5 * float(extents[0])
+    half_x = 0.5 * float(extents[0]) * (1.0 - 2.0 * end_margin)
     max_radius = float(np.hypot(extents[1], extents[2]))
     order = np.argsort(local_points[:, 0])  # sorted once; each slice is then two binary searches
     xs = local_points[order, 0]

@@ -53,15 +53,20 @@ def remainder_box(heights: np.ndarray, crop_bottom: float, up: np.ndarray, plane
     return OrientedBox.from_extents(center, R, extents)
 
 
-def pad_boxes(R: np.ndarray, p_plus: np.ndarray, p_minus: np.ndarray, cfg: GraspPlannerConfig
-              ) -> tuple[OrientedBox, OrientedBox]:
-    """The two pad boxes of a grasp whose gripper rotation is ``R`` (y from ``p_minus`` to ``p_plus``)."""
+def pad_boxes(R: np.ndarray, p_plus: np.ndarray, p_minus: np.ndarray, cfg: GraspPlannerConfig,
+              back: float = 0.0) -> tuple[OrientedBox, OrientedBox]:
+    """The two pad boxes of a grasp whose gripper rotation is ``R`` (y from ``p_minus`` to ``p_plus``).
+
+    Centred on the contacts along the approach, or ``back`` metres behind them (top-down grasps on a
+    low object: the fingertips stop above the table, so the pads sit higher than the contacts).
+    """
     g = cfg.gripper
     y = R[:, 1]
     shift = 0.5 * g.pad_thickness + 0.5 * cfg.pad_gap
     ext = np.array(g.pad_extents)
-    return (OrientedBox.from_extents(p_plus + shift * y, R, ext),
-            OrientedBox.from_extents(p_minus - shift * y, R, ext))
+    along = -back * R[:, 0]
+    return (OrientedBox.from_extents(p_plus + shift * y + along, R, ext),
+            OrientedBox.from_extents(p_minus - shift * y + along, R, ext))
 
 
 def palm_box(R: np.ndarray, tcp: np.ndarray, cfg: GraspPlannerConfig) -> OrientedBox:

@@ -150,7 +150,7 @@ def plan_grasps_for_cloud(cloud: PointCloud, table: Plane, config: GraspPlannerC
 def _plan_frontal(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, cfg: GraspPlannerConfig,
                   rej: Rejections) -> list[PlannedGrasp]:
     g = cfg.gripper
-    top = float(inp.heights.max())
+    top = _object_top(inp.heights)
     needed = 0.5 * (g.palm_height if cfg.check_palm else g.pad_width) + cfg.table_clearance
     if top < needed:
         rej.add("too_short_for_frontal", example={
@@ -181,14 +181,14 @@ def _plan_frontal(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, cf
             continue
         nrm = inp.normals[[pair.j, pair.i]] if swapped else inp.normals[[pair.i, pair.j]]
         out.append(_make_grasp("frontal", axis, pair, R, np.array([p_plus, p_minus]), nrm, inp,
-                               cfg.grasp_depth, cfg.frontal_offsets_deg, center, cfg))
+                               cfg.grasp_depth, cfg.frontal_offsets_deg, center, cfg, boxes))
     out.sort(key=lambda gr: -gr.rank)
     return out
 
 
 def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, cfg: GraspPlannerConfig,
                    rej: Rejections) -> list[PlannedGrasp]:
-    top = float(inp.heights.max())
+    top = _object_top(inp.heights)
     crop_bottom = top - cfg.top_down_crop_height
     keep = np.flatnonzero(inp.heights >= crop_bottom)
     if len(keep) < MIN_POINTS:
@@ -197,6 +197,7 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
     xyz, nrm = inp.xyz[keep], inp.normals[keep]
     crop_frame = object_frame(xyz, inp.up)
     below = remainder_box(inp.heights, crop_bottom, inp.up, inp.offset, frame.box)
+    table = table_box(inp.xyz, inp.up, inp.offset, cfg.table_box_size, cfg.table_box_height)
     out: list[PlannedGrasp] = []
     for pair, axis in _ranked_pairs(xyz, nrm, inp.up, crop_frame, cfg, "top_down", rej):
         if _axis_full(out, axis, cfg):
@@ -204,11 +205,28 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
         p1, p2 = xyz[pair.i], xyz[pair.j]
         R, swapped = top_down_rotation(p1, p2, inp.up, np.asarray(cfg.approach_origin, float))
         p_plus, p_minus = (p2, p1) if swapped else (p1, p2)
-        boxes = dict(zip(("pad_plus", "pad_minus"), pad_boxes(R, p_plus, p_minus, cfg), strict=True))
+        # the fingertips stop above the table: lift the pads along the approach until their lowest
+        # corner clears it (a no-op unless the contacts are within half a pad length of the table)
+        pads = pad_boxes(R, p_plus, p_minus, cfg)
+        lowest = min(float((b.corners() @ inp.up).min()) for b in pads) + inp.offset
+        rise = cfg.table_clearance + 1e-4 - lowest
+        if rise > 0:
+            pads = pad_boxes(R, p_plus, p_minus, cfg, back=rise / max(-float(R[:, 0] @ inp.up), 1e-6))
+        boxes = dict(zip(("pad_plus", "pad_minus"), pads, strict=True))
+        example = {"kind": "top_down", "axis": axis, "rank": pair.rank, "contacts": [p_plus, p_minus]}
+        reach = [abs(b.to_local(c[None])[0, 0]) <= b.half_extents[0] for b, c in zip(pads, (p_plus, p_minus),
+                                                                                       strict=True)]
+        if not all(reach):  # lifted so far that a pad no longer covers its contact
+            rej.add("collides_with_table", example={**example, "box": "fingertip", "table": "table"})
+            continue
         example = {"kind": "top_down", "axis": axis, "rank": pair.rank, "contacts": [p_plus, p_minus]}
         hit = first_overlap(boxes, below, cfg.table_clearance) if below is not None else None
         if hit:
             rej.add("collides_with_table", example={**example, "box": hit, "table": "object_below_crop"})
+            continue
+        hit = first_overlap(boxes, table, cfg.table_clearance)
+        if hit:
+            rej.add("collides_with_table", example={**example, "box": hit, "table": "table"})
             continue
         n_hit, which = _object_hits(boxes, inp.xyz, cfg)
         if n_hit:
@@ -218,7 +236,7 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
         depth = float(np.clip(mid_height - cfg.table_clearance, 0.0, cfg.grasp_depth))
         n_pair = nrm[[pair.j, pair.i]] if swapped else nrm[[pair.i, pair.j]]
         out.append(_make_grasp("top_down", axis, pair, R, np.array([p_plus, p_minus]), n_pair, inp,
-                               depth, cfg.top_down_offsets_deg, center, cfg))
+                               depth, cfg.top_down_offsets_deg, center, cfg, boxes))
     out.sort(key=lambda gr: -gr.rank)
     return out
 
@@ -252,6 +270,11 @@ def _ranked_pairs(xyz: np.ndarray, normals: np.ndarray, up: np.ndarray, frame: O
     return out
 
 
+def _object_top(heights: np.ndarray) -> float:
+    """Height of the object's top, robust to a few noisy points above it (99.5th percentile)."""
+    return float(np.quantile(heights, 0.995))
+
+
 def _axis_full(found: list[PlannedGrasp], axis: str, cfg: GraspPlannerConfig) -> bool:
     return sum(g.axis == axis for g in found) >= cfg.candidates_per_axis
 
@@ -269,11 +292,12 @@ def _object_hits(boxes: dict[str, OrientedBox], xyz: np.ndarray, cfg: GraspPlann
 
 def _make_grasp(kind: str, axis: str, pair: RankedPair, R: np.ndarray, contacts: np.ndarray,
                 contact_normals: np.ndarray, inp: PlanningInput, depth: float, offsets: tuple[float, ...],
-                center: np.ndarray, cfg: GraspPlannerConfig) -> PlannedGrasp:
+                center: np.ndarray, cfg: GraspPlannerConfig, boxes: dict[str, OrientedBox]
+                ) -> PlannedGrasp:
     """A surviving grasp with its poses; ``contacts`` = (p_plus, p_minus), y running minus → plus."""
     mid = 0.5 * (contacts[0] + contacts[1])
     poses = grasp_poses(R, mid, depth, cfg.pregrasp_back_off, offsets, inp.up, center, cfg.turn_deg)
     metrics = {**pair.metrics, "depth": depth, "contact_height": float(mid @ inp.up + inp.offset)}
     return PlannedGrasp(kind=kind, axis=axis, contacts=np.asarray(contacts, float),
                         contact_normals=np.asarray(contact_normals, float), width=pair.metrics["width"],
-                        rank=pair.rank, metrics=metrics, poses=poses)
+                        rank=pair.rank, metrics=metrics, poses=poses, collision_boxes=boxes)

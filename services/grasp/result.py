@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from common.messages import Grasp, Pose
+from services.grasp.boxes import OrientedBox
 
 REASONS = (
     "too_short_for_frontal",
@@ -39,6 +40,8 @@ class PlannedGrasp:
     rank: float
     metrics: dict[str, float]
     poses: dict[str, np.ndarray]
+    collision_boxes: dict[str, OrientedBox] = field(default_factory=dict)
+    """The hand boxes the collision filter checked (pads, and the palm for frontal grasps)."""
 
     @property
     def T_base_gripper(self) -> np.ndarray:
