@@ -24,14 +24,17 @@ class GlobalResult:
     """Outcome of one global registration: ``T`` maps source points onto the target (``p_t = T @ p_s``).
 
     ``lcp_score`` is the Largest Common Pointset score: the fraction of (sampled, down-sampled) source points
-    that land within ``delta`` of a target point after ``T``. It is comparable across methods as long as
-    the same ``delta`` and clouds are used, which is why ``global_register`` computes it for every method.
+    that land within ``delta`` of a target point after ``T``. ``score`` is the weighted LCP,
+    mean(max(0, 1 - d^2 / delta^2)): it does not saturate at 1 the way LCP does on small objects, so it is
+    what candidates (and overlaps, and methods) are ranked by. Both are comparable across methods as long as
+    the same ``delta`` and clouds are used, which is why ``global_register`` computes them for every method.
     """
 
     T: np.ndarray
     lcp_score: float
     n_bases_tried: int
     seconds: float
+    score: float = 0.0
     method: str = "4pcs"
     overlap: float | None = None
     extra: dict = field(default_factory=dict)
