@@ -13,6 +13,7 @@ request directly on the event loop.
 from __future__ import annotations
 
 import asyncio
+import threading
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -104,6 +105,7 @@ class Camera(ABC):
         self.config = config
         self._connected = False
         self._seq = 0
+        self._lock = threading.RLock()  # one capture at a time: the service may get concurrent requests
 
     # ---------------------------------------------------------------- what a backend implements
     @abstractmethod
@@ -129,24 +131,27 @@ class Camera(ABC):
 
     def connect(self) -> None:
         """Open the camera; calling it twice is harmless."""
-        if self._connected:
-            return
-        self._open()
-        self._connected = True
+        with self._lock:
+            if self._connected:
+                return
+            self._open()
+            self._connected = True
 
     def disconnect(self) -> None:
         """Release the camera; calling it twice (or before connect) is harmless."""
-        if not self._connected:
-            return
-        try:
-            self._close()
-        finally:
-            self._connected = False
+        with self._lock:
+            if not self._connected:
+                return
+            try:
+                self._close()
+            finally:
+                self._connected = False
 
     def capture(self, T_base_camera: np.ndarray | None = None) -> RGBDFrame:
         """Capture one aligned RGB-D frame stamped with ``T_base_camera`` (validated) and the next seq."""
-        T = self._before_capture(T_base_camera)
-        return self._after_capture(self._grab(T))
+        with self._lock:
+            T = self._before_capture(T_base_camera)
+            return self._after_capture(self._grab(T))
 
     async def acapture(self, T_base_camera: np.ndarray | None = None) -> RGBDFrame:
         """Asyncio face of ``capture``: runs the blocking capture in a worker thread."""

@@ -137,3 +137,17 @@ def test_missing_or_empty_session_folder(tmp_path):
     with pytest.raises(ReplayDataError) as err:
         cam.connect()
     assert "no complete scan" in err.value.message and not cam.is_connected
+
+
+def test_concurrent_captures_get_distinct_frames(tmp_path):
+    import asyncio
+
+    cam = ReplayCamera(ReplayCameraConfig(session_dir=_session(tmp_path)))
+
+    async def main():
+        await cam.aconnect()
+        return await asyncio.gather(*(cam.acapture() for _ in range(VIEWS * SCANS)))
+
+    frames = asyncio.run(main())
+    assert sorted(f.meta["replay"]["index"] for f in frames) == list(range(VIEWS * SCANS))
+    assert cam.info()["frames"] == VIEWS * SCANS

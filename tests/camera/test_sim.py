@@ -177,3 +177,21 @@ def test_config_and_construction_errors():
         make_camera({"backend": "sim"})  # no render_request
     with pytest.raises(CameraConfigError):
         SimCamera().connect()
+
+
+def test_concurrent_async_captures_are_serialised():
+    twin = FakeTwin()
+    active = []
+
+    async def render(T, w, h):
+        active.append(1)
+        assert len(active) == 1, "two renders ran at once"
+        await asyncio.sleep(0.01)
+        active.pop()
+        return twin(T, w, h)
+
+    async def main():
+        with SimCamera(render_request=render) as cam:
+            return await asyncio.gather(*(cam.acapture(POSE) for _ in range(4)))
+
+    assert sorted(f.seq for f in asyncio.run(main())) == [0, 1, 2, 3]

@@ -37,6 +37,7 @@ class SimCamera(Camera):
     def __init__(self, config: SimCameraConfig | None = None, *, render_request: RenderRequest | None = None):
         super().__init__(config or SimCameraConfig())
         self.render_request = render_request
+        self._alock: asyncio.Lock | None = None
 
     @property
     def intrinsics(self) -> Intrinsics:
@@ -70,7 +71,16 @@ class SimCamera(Camera):
 
     # ------------------------------------------------------------------------------- async capture
     async def acapture(self, T_base_camera: np.ndarray | None = None) -> RGBDFrame:
-        """Await the render on the running loop (async render_request) or in a worker thread (plain)."""
+        """Await the render on the running loop (async render_request) or in a worker thread (plain).
+
+        Concurrent calls are served one after the other, so sequence numbers follow the order of renders.
+        """
+        if self._alock is None:
+            self._alock = asyncio.Lock()
+        async with self._alock:
+            return await self._acapture(T_base_camera)
+
+    async def _acapture(self, T_base_camera: np.ndarray | None) -> RGBDFrame:
         T = self._before_capture(T_base_camera)
         if inspect.iscoroutinefunction(self.render_request):
             result: Any = self.render_request(T, *self._size())
