@@ -136,7 +136,7 @@ def register_4pcs(source_xyz: np.ndarray, target_xyz: np.ndarray, *, overlap: fl
         order = order[quick_scores[order] >= 0.8 * best_score]  # staged early rejection
         if order.size == 0:
             continue
-        hard, soft = _lcp_batch(verify, R[order], t[order], target_tree, delta)
+        hard, soft = lcp_batch(verify, R[order], t[order], target_tree, delta)
         k = int(np.argmax(soft))
         T_k = np.eye(4)
         T_k[:3, :3], T_k[:3, 3] = R[order[k]], t[order[k]]
@@ -176,7 +176,7 @@ def lcp_score(source_xyz: np.ndarray, target_xyz: np.ndarray | cKDTree, T: np.nd
     src = as_xyz(source_xyz, "source_xyz")
     tree = target_xyz if isinstance(target_xyz, cKDTree) else cKDTree(as_xyz(target_xyz, "target_xyz"))
     T = np.asarray(T, dtype=np.float64)
-    return float(_lcp_batch(src, T[None, :3, :3], T[None, :3, 3], tree, delta)[0][0])
+    return float(lcp_batch(src, T[None, :3, :3], T[None, :3, 3], tree, delta)[0][0])
 
 
 def weighted_lcp_score(source_xyz: np.ndarray, target_xyz: np.ndarray | cKDTree, T: np.ndarray,
@@ -185,7 +185,7 @@ def weighted_lcp_score(source_xyz: np.ndarray, target_xyz: np.ndarray | cKDTree,
     src = as_xyz(source_xyz, "source_xyz")
     tree = target_xyz if isinstance(target_xyz, cKDTree) else cKDTree(as_xyz(target_xyz, "target_xyz"))
     T = np.asarray(T, dtype=np.float64)
-    return float(_lcp_batch(src, T[None, :3, :3], T[None, :3, 3], tree, delta)[1][0])
+    return float(lcp_batch(src, T[None, :3, :3], T[None, :3, 3], tree, delta)[1][0])
 
 
 class _DistanceGrid:
@@ -372,7 +372,7 @@ def _kabsch_batch(B: np.ndarray, Qs: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return R, t, rms
 
 
-def _lcp_batch(P: np.ndarray, R: np.ndarray, t: np.ndarray, tree: cKDTree,
+def lcp_batch(P: np.ndarray, R: np.ndarray, t: np.ndarray, tree: cKDTree,
                delta: float) -> tuple[np.ndarray, np.ndarray]:
     """(LCP, weighted LCP) of points ``P`` under each of the M transforms.
 

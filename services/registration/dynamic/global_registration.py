@@ -1,0 +1,178 @@
+"""One interface over the three global registration methods: 4PCS (ours), FPFH-RANSAC and FGR (Open3D).
+
+The paper's pair registration starts from a global alignment at 8 mm voxels with Super 4PCS, run with
+overlaps 0.9, 0.85 and 0.8, the best fitness winning. ``global_register`` does exactly that for
+``method="4pcs"`` and runs Open3D's FPFH-RANSAC or FGR (legacy API, the only home of both) otherwise, so
+the pipeline and the benchmark can swap them. Every method's result is scored the same way - LCP and
+weighted LCP of the down-sampled source against the down-sampled target at ``delta = voxel`` - so results
+are comparable across overlaps and methods.
+
+Clouds are numpy (N, 3) arrays or Open3D point clouds; normals are estimated at 2.5 x voxel when absent
+(4PCS uses them for its normal filter, FPFH needs them). ``o3d.utility.random.seed(seed)`` is called
+before RANSAC, which makes it reproducible with ``OMP_NUM_THREADS=1``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from time import perf_counter
+
+import numpy as np
+import open3d as o3d
+from scipy.spatial import cKDTree
+
+from services.registration.dynamic.fourpcs import FourPCSConfig, lcp_batch, register_4pcs
+from services.registration.dynamic.fourpcs_common import (
+    GlobalResult,
+    PointCloudInputError,
+    as_optional_rows,
+    as_xyz,
+    check_transform,
+)
+
+METHODS = ("4pcs", "fpfh_ransac", "fgr")
+PAPER_OVERLAPS = (0.9, 0.85, 0.8)
+
+reg = o3d.pipelines.registration
+
+
+@dataclass(frozen=True)
+class GlobalRegistrationConfig:
+    """Parameters of the three methods (multiples are of the voxel size), Open3D-tutorial defaults."""
+
+    normal_radius_factor: float = 2.5
+    fpfh_radius_factor: float = 5.0
+    fpfh_max_nn: int = 100
+    ransac_distance_factor: float = 1.5
+    ransac_max_iteration: int = 100_000
+    ransac_confidence: float = 0.999
+    fgr_distance_factor: float = 0.5
+    fourpcs_max_time_s: float = 2.0
+    fourpcs_sample_size: int = 300
+    fourpcs: FourPCSConfig = FourPCSConfig()
+
+
+def global_register(source: np.ndarray | o3d.geometry.PointCloud, target: np.ndarray | o3d.geometry.PointCloud,
+                    method: str = "4pcs", *, voxel: float = 0.008,
+                    overlap: float | Sequence[float] = PAPER_OVERLAPS, seed: int = 0,
+                    source_normals: np.ndarray | None = None, target_normals: np.ndarray | None = None,
+                    config: GlobalRegistrationConfig | None = None) -> GlobalResult:
+    """Global (initial-guess-free) ``T`` with ``target ~ T @ source``, by ``method`` at ``voxel`` metres.
+
+    ``overlap`` is used by 4PCS only; a sequence runs 4PCS once per value (seeds ``seed``, ``seed + 1``, ...)
+    and keeps the highest weighted LCP, as the paper does with 0.9, 0.85, 0.8. The result's ``seconds``
+    include down-sampling, normals and features.
+    """
+    cfg = config or GlobalRegistrationConfig()
+    if method not in METHODS:
+        raise PointCloudInputError(f"unknown global registration method {method!r}; use one of {METHODS}",
+                                   code="bad_value", detail={"field": "method"})
+    if not voxel > 0:
+        raise PointCloudInputError(f"voxel must be > 0, got {voxel}", code="bad_value",
+                                   detail={"field": "voxel"})
+    t0 = perf_counter()
+    src = preprocess(source, voxel, normals=source_normals, normal_radius_factor=cfg.normal_radius_factor,
+                     name="source")
+    tgt = preprocess(target, voxel, normals=target_normals, normal_radius_factor=cfg.normal_radius_factor,
+                     name="target")
+    if method == "4pcs":
+        overlaps = [float(overlap)] if np.isscalar(overlap) else [float(o) for o in overlap]
+        if not overlaps:
+            raise PointCloudInputError("overlap list is empty", code="bad_value", detail={"field": "overlap"})
+        src_xyz, tgt_xyz = np.asarray(src.points), np.asarray(tgt.points)
+        src_n, tgt_n = np.asarray(src.normals), np.asarray(tgt.normals)
+        runs = [register_4pcs(src_xyz, tgt_xyz, overlap=o, delta=voxel, seed=seed + k,
+                              max_time_s=cfg.fourpcs_max_time_s, sample_size=cfg.fourpcs_sample_size,
+                              source_normals=src_n, target_normals=tgt_n, config=cfg.fourpcs)
+                for k, o in enumerate(overlaps)]
+        best = max(runs, key=lambda r: r.score)
+        result = replace(best, n_bases_tried=sum(r.n_bases_tried for r in runs),
+                         extra={**best.extra, "scores_per_overlap": {r.overlap: r.score for r in runs}})
+    else:
+        T = _feature_based(src, tgt, method, voxel, seed, cfg)
+        result = GlobalResult(T=T, lcp_score=0.0, n_bases_tried=0, seconds=0.0, method=method)
+    lcp, weighted = score_alignment(np.asarray(src.points), np.asarray(tgt.points), result.T, voxel)
+    return replace(result, lcp_score=lcp, score=weighted, seconds=perf_counter() - t0,
+                   extra={**result.extra, "n_source": len(src.points), "n_target": len(tgt.points),
+                          "voxel": voxel})
+
+
+def preprocess(cloud: np.ndarray | o3d.geometry.PointCloud, voxel: float, *, normals: np.ndarray | None = None,
+               normal_radius_factor: float = 2.5, name: str = "cloud") -> o3d.geometry.PointCloud:
+    """Voxel-down-sampled copy with normals (given ones are averaged per voxel, else estimated)."""
+    if isinstance(cloud, o3d.geometry.PointCloud):
+        pcd = o3d.geometry.PointCloud(cloud)
+        as_xyz(np.asarray(pcd.points), name, min_points=4)
+        if normals is not None:
+            pcd.normals = o3d.utility.Vector3dVector(as_optional_rows(normals, len(pcd.points), f"{name}_normals"))
+    else:
+        xyz = as_xyz(cloud, name, min_points=4)
+        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz))
+        if normals is not None:
+            pcd.normals = o3d.utility.Vector3dVector(as_optional_rows(normals, xyz.shape[0], f"{name}_normals"))
+    down = pcd.voxel_down_sample(voxel)
+    if len(down.points) < 4:
+        raise PointCloudInputError(f"{name} has {len(down.points)} points after {voxel} m voxels, need 4",
+                                   code="too_few_points", detail={"field": name})
+    if not down.has_normals():
+        down.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=normal_radius_factor * voxel, max_nn=30))
+    else:
+        n = np.asarray(down.normals)
+        down.normals = o3d.utility.Vector3dVector(n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12))
+    return down
+
+
+def score_alignment(source_xyz: np.ndarray, target_xyz: np.ndarray, T: np.ndarray,
+                    delta: float) -> tuple[float, float]:
+    """(LCP, weighted LCP) of the source after ``T`` against the target at distance ``delta``."""
+    src = as_xyz(source_xyz, "source_xyz")
+    tree = cKDTree(as_xyz(target_xyz, "target_xyz"))
+    T = check_transform(T)
+    hard, soft = lcp_batch(src, T[None, :3, :3], T[None, :3, 3], tree, delta)
+    return float(hard[0]), float(soft[0])
+
+
+def refine_icp(source: np.ndarray | o3d.geometry.PointCloud, target: np.ndarray | o3d.geometry.PointCloud,
+               T_init: np.ndarray, *, voxel: float = 0.004, max_correspondence_factor: float = 2.0,
+               iterations: int = 50) -> tuple[np.ndarray, float, float]:
+    """Point-to-plane ICP from ``T_init`` at ``voxel``: (T, fitness, inlier RMSE).
+
+    A plain local refinement for tests and the benchmark ("success after local refinement"); the paper's
+    full local stage (color ICP, GICP, overlap removal) lives in the pair-registration pipeline.
+    """
+    src = preprocess(source, voxel, name="source")
+    tgt = preprocess(target, voxel, name="target")
+    out = reg.registration_icp(src, tgt, max_correspondence_factor * voxel, check_transform(T_init, "T_init"),
+                               reg.TransformationEstimationPointToPlane(),
+                               reg.ICPConvergenceCriteria(max_iteration=iterations))
+    return np.array(out.transformation), float(out.fitness), float(out.inlier_rmse)
+
+
+def _feature_based(src: o3d.geometry.PointCloud, tgt: o3d.geometry.PointCloud, method: str, voxel: float,
+                   seed: int, cfg: GlobalRegistrationConfig) -> np.ndarray:
+    feat_param = o3d.geometry.KDTreeSearchParamHybrid(radius=cfg.fpfh_radius_factor * voxel,
+                                                      max_nn=cfg.fpfh_max_nn)
+    f_src = reg.compute_fpfh_feature(src, feat_param)
+    f_tgt = reg.compute_fpfh_feature(tgt, feat_param)
+    if method == "fgr":
+        opt = reg.FastGlobalRegistrationOption(maximum_correspondence_distance=cfg.fgr_distance_factor * voxel,
+                                               seed=seed) if _fgr_has_seed() else \
+            reg.FastGlobalRegistrationOption(maximum_correspondence_distance=cfg.fgr_distance_factor * voxel)
+        out = reg.registration_fgr_based_on_feature_matching(src, tgt, f_src, f_tgt, opt)
+        return np.array(out.transformation)
+    dist = cfg.ransac_distance_factor * voxel
+    o3d.utility.random.seed(seed)
+    out = reg.registration_ransac_based_on_feature_matching(
+        src, tgt, f_src, f_tgt, True, dist, reg.TransformationEstimationPointToPoint(False), 3,
+        [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)],
+        reg.RANSACConvergenceCriteria(cfg.ransac_max_iteration, cfg.ransac_confidence))
+    return np.array(out.transformation)
+
+
+def _fgr_has_seed() -> bool:
+    try:
+        reg.FastGlobalRegistrationOption(seed=0)
+        return True
+    except TypeError:
+        return False
