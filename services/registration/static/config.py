@@ -31,15 +31,22 @@ class StaticConfig:
     centre_window: int = 15  # px; the centre depth is the median valid depth in this window
 
     # --- local registration from the arm's poses (default profile) --------------------------------------
-    local_voxels: tuple[float, ...] = (0.005, 0.002)  # coarse-to-fine pyramid
+    # 1st choice: dense RGB-D odometry (photometric + depth) seeded with the arm's relative pose
+    odometry_step: int = 2  # image decimation (2: 320x240 from 640x480), 4x faster, ~0.2 mm
+    odometry_iterations: tuple[int, ...] = (10, 5)  # per pyramid level, coarse to fine
+    odometry_hybrid: bool = True  # photometric + depth terms (False: photometric only)
+    odometry_max_depth_diff: float = 0.02  # m; pixel pairs farther apart in depth are not matched
+    # 2nd choice (odometry failed the check): coarse-to-fine GICP from the arm's pose on the ROI clouds
+    local_voxels: tuple[float, ...] = (0.005, 0.002)
     local_corr_factor: float = 3.0  # max correspondence distance = factor x voxel
     local_iterations: int = 40
-    use_color: bool = True  # colored ICP at the finest level (fixes rotation about symmetric axes)
-    color_lambda_geometric: float = 0.968  # Open3D's default weight of geometry vs color
+    color_lambda_geometric: float = 0.968  # colored ICP weight of geometry vs color (paper profile)
 
-    # --- verification: when is a local result trusted ----------------------------------------------------
-    min_fitness: float = 0.3  # fraction of source points with a correspondence at the finest level
-    max_rmse: float = 0.003  # m, inlier RMSE at the finest level
+    # --- verification: when is a result trusted ----------------------------------------------------------
+    check_voxel: float = 0.003  # m; the clouds a result is checked on
+    check_corr_factor: float = 2.0  # correspondence distance of the check = factor x check_voxel
+    min_fitness: float = 0.3  # fraction of source points with a correspondence
+    max_rmse: float = 0.003  # m, inlier RMSE
     max_correction_m: float = 0.02  # m; the arm's pose is right to a few mm, a bigger jump is suspect
     max_correction_deg: float = 4.0
 
@@ -77,9 +84,7 @@ class StaticConfig:
     @classmethod
     def paper(cls, **overrides: Any) -> StaticConfig:
         """The paper's profile: no pose prior, no crop, global registration first, 1 mm final voxel."""
-        base = dict(
-            profile="paper", roi_radius=None, output_voxel=0.002, select_by="centroid", use_pose_graph=True
-        )
+        base = dict(profile="paper", roi_radius=None, output_voxel=0.002, select_by="centroid", use_pose_graph=True)
         base.update(overrides)
         return cls(**base)
 

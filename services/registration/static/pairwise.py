@@ -42,9 +42,7 @@ def evaluate(
 
 def fpfh(pcd: o3d.geometry.PointCloud, voxel: float, radius_factor: float = 5.0) -> reg.Feature:
     """FPFH features of a down-sampled cloud with normals (radius = factor x voxel, as Open3D's tutorial)."""
-    return reg.compute_fpfh_feature(
-        pcd, o3d.geometry.KDTreeSearchParamHybrid(radius=voxel * radius_factor, max_nn=100)
-    )
+    return reg.compute_fpfh_feature(pcd, o3d.geometry.KDTreeSearchParamHybrid(radius=voxel * radius_factor, max_nn=100))
 
 
 def global_ransac(

@@ -28,13 +28,15 @@ from services.registration.cloud import (
     downsample,
     estimate_normals,
     frame_points,
+    from_o3d,
     to_o3d,
 )
 
 from . import pairwise as pw
 from .config import StaticConfig
-from .errors import BadFramesError, EmptyDepthError, NoObjectError
+from .errors import BadFramesError, EmptyDepthError
 from .isolate import footprint_centre, isolate_object
+from .odometry import pinhole, rgbd_image, rgbd_odometry
 from .posegraph import optimise
 from .result import ScanResult, Stopwatch, ViewResult
 from .table import segment_table
@@ -118,43 +120,67 @@ def _roi_mask(xyz_base: np.ndarray, seed: np.ndarray, cfg: StaticConfig) -> np.n
 # ------------------------------------------------------------------------------------- default profile
 
 
-def _pyramid(pcd: o3d.geometry.PointCloud, voxels: tuple[float, ...], toward: np.ndarray) -> list:
-    return [downsample(pcd, v, toward=toward) for v in voxels]
+@dataclass
+class PairOutcome:
+    """One registered pair: T maps source camera points into the target camera's frame."""
+
+    T: np.ndarray
+    path: str  # "local" | "global"
+    method: str  # "rgbd_odometry" | "icp" | "fpfh+icp"
+    check: pw.PairResult
+    verified: bool
 
 
-def _local(src_levels: list, tgt_levels: list, cfg: StaticConfig, init: np.ndarray) -> pw.PairResult:
-    """Coarse-to-fine ICP: point-to-plane at each coarse level, colored ICP at the finest (if enabled)."""
-    T = init
-    res = None
-    for k, v in enumerate(cfg.local_voxels):
-        max_corr = v * cfg.local_corr_factor
-        finest = k == len(cfg.local_voxels) - 1
-        s, t = src_levels[k], tgt_levels[k]
-        if finest and cfg.use_color and s.has_colors() and t.has_colors():
-            res = pw.icp_colored(s, t, max_corr, T, cfg.local_iterations, cfg.color_lambda_geometric)
-        else:
-            res = pw.icp_point_to_plane(s, t, max_corr, T, cfg.local_iterations)
-        T = res.T
-    return res
-
-
-def _passes(res: pw.PairResult, cfg: StaticConfig, prior: np.ndarray) -> bool:
-    """The check a local result must pass: overlap, residual, and a correction the arm's error can explain."""
-    dt, dr = transform_error(res.T, prior)
-    return (
+def _check(
+    src: o3d.geometry.PointCloud, tgt: o3d.geometry.PointCloud, T: np.ndarray, prior: np.ndarray, cfg: StaticConfig
+) -> tuple[pw.PairResult, bool]:
+    """Measure a candidate on the check clouds; it passes with enough overlap, a small residual, and a
+    correction of the arm's relative pose that the arm's error can explain."""
+    res = pw.evaluate(src, tgt, T, cfg.check_voxel * cfg.check_corr_factor)
+    dt, dr = transform_error(T, prior)
+    ok = (
         res.fitness >= cfg.min_fitness
         and res.rmse <= cfg.max_rmse
         and dt <= cfg.max_correction_m
         and dr <= cfg.max_correction_deg
     )
+    return res, ok
 
 
-def _pair_default(src: dict, tgt: dict, cfg: StaticConfig, seed: int) -> tuple[pw.PairResult, str, bool]:
-    """Register one pair in ``base``: local first, global only if the local result fails the check."""
-    eye = np.eye(4)
-    local = _local(src["levels"], tgt["levels"], cfg, eye)
-    if _passes(local, cfg, eye):
-        return local, "local", True
+def _gicp_pyramid(src: dict, tgt: dict, cfg: StaticConfig, init: np.ndarray) -> np.ndarray:
+    T = init
+    for k, v in enumerate(cfg.local_voxels):
+        T = pw.icp_generalized(src["levels"][k], tgt["levels"][k], v * cfg.local_corr_factor, T, cfg.local_iterations).T
+    return T
+
+
+def _pair_default(src: dict, tgt: dict, prior: np.ndarray, cfg: StaticConfig, seed: int) -> PairOutcome:
+    """Local first (RGB-D odometry, then GICP, both from the arm's prior), global only when both fail."""
+    ok, T = rgbd_odometry(
+        src["image"](),
+        tgt["image"](),
+        src["intrinsic"],
+        prior,
+        iterations=cfg.odometry_iterations,
+        max_depth_diff=cfg.odometry_max_depth_diff,
+        depth_min=cfg.depth_min,
+        depth_max=cfg.depth_max,
+        hybrid=cfg.odometry_hybrid,
+    )
+    res, passed = _check(src["check"], tgt["check"], T, prior, cfg)
+    if ok and passed:
+        return PairOutcome(T, "local", "rgbd_odometry", res, True)
+    candidates = [PairOutcome(T, "local", "rgbd_odometry", res, False)] if ok else []
+    _levels(src, cfg)
+    _levels(tgt, cfg)
+    T = _gicp_pyramid(src, tgt, cfg, prior)
+    res, passed = _check(src["check"], tgt["check"], T, prior, cfg)
+    if passed:
+        return PairOutcome(T, "local", "icp", res, True)
+    candidates.append(PairOutcome(T, "local", "icp", res, False))
+    for d in (src, tgt):
+        if "global" not in d:
+            d["global"] = downsample(d["pcd"], cfg.global_voxel, toward=np.zeros(3))
     glob = pw.global_ransac(
         src["global"],
         tgt["global"],
@@ -165,100 +191,81 @@ def _pair_default(src: dict, tgt: dict, cfg: StaticConfig, seed: int) -> tuple[p
         radius_factor=cfg.fpfh_radius_factor,
         corr_factor=cfg.ransac_corr_factor,
     )
-    refined = _local(src["levels"], tgt["levels"], cfg, glob.T)
-    glob_ok = refined.fitness >= cfg.min_fitness and refined.rmse <= cfg.max_rmse
-    local_ok = local.fitness >= cfg.min_fitness and local.rmse <= cfg.max_rmse
-    if glob_ok and (not local_ok or refined.fitness > local.fitness + 0.02):
-        return refined, "global", True
-    return local, "local", local_ok
+    T = _gicp_pyramid(src, tgt, cfg, glob.T)
+    res = pw.evaluate(src["check"], tgt["check"], T, cfg.check_voxel * cfg.check_corr_factor)
+    # the arm's prior has failed: the global result only has to pass the overlap and residual checks
+    if res.fitness >= cfg.min_fitness and res.rmse <= cfg.max_rmse:
+        return PairOutcome(T, "global", "fpfh+icp", res, True)
+    candidates.append(PairOutcome(T, "global", "fpfh+icp", res, False))
+    return max(candidates, key=lambda c: (c.check.fitness, -c.check.rmse))
+
+
+def _levels(d: dict, cfg: StaticConfig) -> None:
+    if "levels" not in d:
+        d["levels"] = [downsample(d["pcd"], v, toward=np.zeros(3)) for v in cfg.local_voxels]
 
 
 def _register_default(
-    scans: list[Scan], seed_base: np.ndarray | None, cfg: StaticConfig, sw: Stopwatch
-) -> tuple[list[np.ndarray], list[ScanResult], list[np.ndarray]]:
-    """Corrections C_j (base -> base, C_0 = I) such that C_j @ T_believed_j is scan j's pose."""
+    scans: list[Scan], frames: list[RGBDFrame], seed_base: np.ndarray | None, cfg: StaticConfig, sw: Stopwatch
+) -> tuple[list[np.ndarray], list[PairOutcome | None]]:
+    """Camera poses relative to scan 0 (T_c0_cj), from the arm's poses refined pairwise."""
     with sw("roi"):
-        base_pts = []
         for s in scans:
-            xyz = transform_points(s.T_believed, s.pts_cam.xyz)
             if seed_base is not None and cfg.roi_radius is not None:
-                keep = _roi_mask(xyz, seed_base, cfg)
+                keep = _roi_mask(transform_points(s.T_believed, s.pts_cam.xyz), seed_base, cfg)
                 if keep.sum() >= MIN_SCAN_POINTS:
-                    xyz, s.pts_cam = xyz[keep], s.pts_cam.subset(keep)
-            base_pts.append(xyz)
+                    s.pts_cam = s.pts_cam.subset(keep)
     if len(scans) == 1:
-        return [np.eye(4)], [_anchor_result(scans[0])], base_pts
+        return [np.eye(4)], [None]
     with sw("preprocess"):
         data = []
-        for s, xyz in zip(scans, base_pts, strict=True):
-            pcd = to_o3d(xyz, s.pts_cam.rgb)
-            levels = _pyramid(pcd, cfg.local_voxels, s.camera_centre)
-            data.append({"levels": levels, "_pcd": pcd, "centre": s.camera_centre})
-    with sw("register"):
-        edges, results = _all_pairs(scans, data, cfg)
-    return _finish(scans, data, edges, results, cfg, sw, base_pts, path_of=None)
-
-
-def _global_features(d: dict, cfg: StaticConfig) -> None:
-    if "global" not in d:
-        d["global"] = downsample(d["_pcd"], cfg.global_voxel, toward=d["centre"])
-
-
-def _all_pairs(scans: list[Scan], data: list[dict], cfg: StaticConfig) -> tuple[list, dict]:
-    edges, results = [], {}
-    n = len(scans)
-    for j in range(1, n):
-        for i in range(j):
-            src, tgt = data[j], data[i]
-            _global_features(src, cfg)  # cheap at 1 cm; needed only when a pair falls back
-            _global_features(tgt, cfg)
-            res, path, ok = _pair_default(src, tgt, cfg, cfg.seed + 31 * j + i)
-            results[(j, i)] = (res, path, ok)
-            fine = cfg.local_voxels[-1] * cfg.local_corr_factor
-            info = pw.information(src["levels"][-1], tgt["levels"][-1], fine, res.T)
-            edges.append((j, i, res.T, info))
-    return edges, results
-
-
-def _finish(scans, data, edges, results, cfg, sw, base_pts, path_of):
-    n = len(scans)
-    initial = [np.eye(4)] + [results[(j, 0)][0].T for j in range(1, n)]
-    with sw("pose_graph"):
-        if cfg.use_pose_graph and n > 2:
-            poses = optimise(n, edges, initial, cfg.local_voxels[-1] * cfg.local_corr_factor)
-        else:
-            poses = initial
-    out = [_anchor_result(scans[0])]
-    fine = cfg.local_voxels[-1] * cfg.local_corr_factor
-    for j in range(1, n):
-        ev = pw.evaluate(data[j]["levels"][-1], data[0]["levels"][-1], poses[j], fine)
-        res, path, ok = results[(j, 0)]
-        out.append(
-            ScanResult(
-                index=j,
-                T_base_camera=poses[j] @ scans[j].T_believed,
-                T_base_camera_believed=scans[j].T_believed,
-                path=path_of or path,
-                fitness=ev.fitness,
-                inlier_rmse=ev.rmse,
-                verified=ok,
-                n_points=len(base_pts[j]),
+        for s, f in zip(scans, frames, strict=True):
+            pcd = to_o3d(s.pts_cam.xyz, s.pts_cam.rgb)
+            data.append(
+                {
+                    "pcd": pcd,
+                    "check": downsample(pcd, cfg.check_voxel, normals=False),
+                    "image": _lazy(
+                        lambda f=f: rgbd_image(
+                            f, step=cfg.odometry_step, depth_min=cfg.depth_min, depth_max=cfg.depth_max
+                        )
+                    ),
+                    "intrinsic": pinhole(f, cfg.odometry_step),
+                }
             )
-        )
-    return poses, out, base_pts
+    with sw("register"):
+        edges, outcomes = [], {}
+        for j in range(1, len(scans)):
+            for i in range(j):
+                prior = invert(scans[i].T_believed) @ scans[j].T_believed
+                out = _pair_default(data[j], data[i], prior, cfg, cfg.seed + 31 * j + i)
+                outcomes[(j, i)] = out
+                info = pw.information(
+                    data[j]["check"], data[i]["check"], cfg.check_voxel * cfg.check_corr_factor, out.T
+                )
+                edges.append((j, i, out.T, info))
+    with sw("pose_graph"):
+        initial = [np.eye(4)] + [outcomes[(j, 0)].T for j in range(1, len(scans))]
+        poses = _optimise(len(scans), edges, initial, cfg)
+    return poses, [None] + [outcomes[(j, 0)] for j in range(1, len(scans))]
 
 
-def _anchor_result(scan: Scan) -> ScanResult:
-    return ScanResult(
-        index=scan.index,
-        T_base_camera=scan.T_believed.copy(),
-        T_base_camera_believed=scan.T_believed,
-        path="anchor",
-        fitness=1.0,
-        inlier_rmse=0.0,
-        verified=True,
-        n_points=len(scan.pts_cam),
-    )
+def _optimise(n: int, edges: list, initial: list[np.ndarray], cfg: StaticConfig) -> list[np.ndarray]:
+    if cfg.use_pose_graph and n > 2:
+        return optimise(n, edges, initial, cfg.check_voxel * cfg.check_corr_factor)
+    return initial
+
+
+def _lazy(make):
+    """A zero-argument callable that builds its value once, on first use."""
+    box: list = []
+
+    def get():
+        if not box:
+            box.append(make())
+        return box[0]
+
+    return get
 
 
 # --------------------------------------------------------------------------------------- paper profile
@@ -307,11 +314,10 @@ def _pair_paper(src: dict, tgt: dict, cfg: StaticConfig, seed: int) -> pw.PairRe
 
 def _register_paper(
     scans: list[Scan], cfg: StaticConfig, sw: Stopwatch
-) -> tuple[list[np.ndarray], list[ScanResult], list[np.ndarray]]:
-    """Corrections C_j in base from camera-frame pairwise registration anchored on scan 0's believed pose."""
-    base_pts = [transform_points(s.T_believed, s.pts_cam.xyz) for s in scans]
+) -> tuple[list[np.ndarray], list[PairOutcome | None]]:
+    """Camera poses relative to scan 0 (T_c0_cj) from the paper's pairwise registration and pose graph."""
     if len(scans) == 1:
-        return [np.eye(4)], [_anchor_result(scans[0])], base_pts
+        return [np.eye(4)], [None]
     origin = np.zeros(3)
     with sw("preprocess"):
         data = []
@@ -322,73 +328,93 @@ def _register_paper(
                 {
                     "global": downsample(pcd, cfg.global_voxel, toward=origin),
                     "global_notable": downsample(notable, cfg.global_voxel, toward=origin),
-                    "levels": _pyramid(notable, cfg.paper_refine_voxels, origin),
+                    "levels": [downsample(notable, v, toward=origin) for v in cfg.paper_refine_voxels],
                     "final": downsample(notable, cfg.paper_final_voxel, toward=origin),
                 }
             )
     n = len(scans)
-    edges, rel = [], {}
+    edges, outcomes = [], {}
+    fine = cfg.paper_refine_voxels[-1] * cfg.local_corr_factor
     with sw("register"):
         for j in range(1, n):
             for i in range(j):
                 res = _pair_paper(data[j], data[i], cfg, cfg.seed + 31 * j + i)
-                fine = cfg.paper_refine_voxels[-1] * cfg.local_corr_factor
-                info = pw.information(data[j]["levels"][-1], data[i]["levels"][-1], fine, res.T)
-                edges.append((j, i, res.T, info))
-                rel[(j, i)] = res
+                check = pw.evaluate(data[j]["levels"][-1], data[i]["levels"][-1], res.T, fine)
+                outcomes[(j, i)] = PairOutcome(res.T, "paper", "paper", check, check.fitness >= cfg.min_fitness)
+                edges.append((j, i, res.T, pw.information(data[j]["levels"][-1], data[i]["levels"][-1], fine, res.T)))
     with sw("pose_graph"):
-        initial = [np.eye(4)] + [rel[(j, 0)].T for j in range(1, n)]
-        fine = cfg.paper_refine_voxels[-1] * cfg.local_corr_factor
-        cam_poses = optimise(n, edges, initial, fine) if cfg.use_pose_graph and n > 2 else initial
-    # T_base_cj = T_base_c0(believed) @ T_c0_cj  ->  correction in base C_j = T_base_cj @ inv(T_believed_j)
-    T0 = scans[0].T_believed
-    corrections = [np.eye(4)] + [T0 @ cam_poses[j] @ invert(scans[j].T_believed) for j in range(1, n)]
-    out = [_anchor_result(scans[0])]
-    for j in range(1, n):
-        ev = pw.evaluate(data[j]["levels"][-1], data[0]["levels"][-1], cam_poses[j], fine)
-        out.append(
-            ScanResult(
-                index=j,
-                T_base_camera=corrections[j] @ scans[j].T_believed,
-                T_base_camera_believed=scans[j].T_believed,
-                path="paper",
-                fitness=ev.fitness,
-                inlier_rmse=ev.rmse,
-                verified=ev.fitness >= cfg.min_fitness,
-                n_points=len(base_pts[j]),
-            )
-        )
-    return corrections, out, base_pts
+        initial = [np.eye(4)] + [outcomes[(j, 0)].T for j in range(1, n)]
+        poses = optimise(n, edges, initial, fine) if cfg.use_pose_graph and n > 2 else initial
+    return poses, [None] + [outcomes[(j, 0)] for j in range(1, n)]
 
 
 # ------------------------------------------------------------------------------------------ entry point
 
 
+def _scan_results(scans: list[Scan], poses: list[np.ndarray], outcomes: list[PairOutcome | None]) -> list[ScanResult]:
+    """Per-scan figures; scan 0's believed pose anchors the view, the others follow T_c0_cj."""
+    T0 = scans[0].T_believed
+    out = []
+    for s, P, oc in zip(scans, poses, outcomes, strict=True):
+        if oc is None:
+            out.append(
+                ScanResult(
+                    index=s.index,
+                    T_base_camera=T0.copy(),
+                    T_base_camera_believed=s.T_believed,
+                    path="anchor",
+                    method="anchor",
+                    fitness=1.0,
+                    inlier_rmse=0.0,
+                    verified=True,
+                    n_points=len(s.pts_cam),
+                )
+            )
+        else:
+            out.append(
+                ScanResult(
+                    index=s.index,
+                    T_base_camera=T0 @ P,
+                    T_base_camera_believed=s.T_believed,
+                    path=oc.path,
+                    method=oc.method,
+                    fitness=oc.check.fitness,
+                    inlier_rmse=oc.check.rmse,
+                    verified=oc.verified,
+                    n_points=len(s.pts_cam),
+                )
+            )
+    return out
+
+
 def register_view(frames: list[RGBDFrame], config: StaticConfig | None = None) -> ViewResult:
     """Register the scans of one view and isolate the goal object, all in ``base``.
 
-    Raises ``BadFramesError`` (unusable inputs), ``EmptyDepthError`` (a frame with no depth),
-    ``NoTableError`` (no horizontal supporting plane) or ``NoObjectError`` (nothing on the table near where
-    the first scan looks).
+    ``frames`` are the scans of one view (scan 0 first: its believed pose anchors the view and its image
+    centre picks the object). Raises ``BadFramesError`` (unusable inputs), ``EmptyDepthError`` (a frame
+    with no depth), ``NoTableError`` (no supporting plane, or not horizontal) or ``NoObjectError`` (nothing
+    on the table near where the first scan looks).
     """
     cfg = config or StaticConfig()
     sw = Stopwatch()
+    frames = list(frames) if isinstance(frames, list | tuple) else frames
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
         with sw("backproject"):
-            scans = _load_scans(list(frames) if isinstance(frames, tuple) else frames, cfg)
+            scans = _load_scans(frames, cfg)
             z0 = centre_depth(frames[0], cfg)
-            seed_cam = None if z0 is None else np.array([0.0, 0.0, z0])
-            # the principal ray: x = y = 0 in the optical frame
-            seed_base = None if seed_cam is None else transform_points(scans[0].T_believed, seed_cam[None])[0]
+            # the paper's seed: the first scan's centre pixel (x = y = 0 in the optical frame) at its depth
+            seed_base = None if z0 is None else transform_points(scans[0].T_believed, np.array([[0.0, 0.0, z0]]))[0]
         if cfg.profile == "paper":
-            corrections, scan_results, base_pts = _register_paper(scans, cfg, sw)
+            poses, outcomes = _register_paper(scans, cfg, sw)
         else:
-            corrections, scan_results, base_pts = _register_default(scans, seed_base, cfg, sw)
+            poses, outcomes = _register_default(scans, frames, seed_base, cfg, sw)
+        scan_results = _scan_results(scans, poses, outcomes)
         with sw("fuse"):
-            xyz = np.concatenate([transform_points(C, p) for C, p in zip(corrections, base_pts, strict=True)])
+            xyz = np.concatenate(
+                [transform_points(r.T_base_camera, s.pts_cam.xyz) for r, s in zip(scan_results, scans, strict=True)]
+            )
             rgb = np.concatenate([s.pts_cam.rgb for s in scans])
-            centres = np.array([r.T_base_camera[:3, 3] for r in scan_results])
-            viewpoint = centres.mean(axis=0)
+            viewpoint = np.mean([r.T_base_camera[:3, 3] for r in scan_results], axis=0)
             scene = to_o3d(xyz, rgb).voxel_down_sample(cfg.output_voxel)
             scene_xyz = np.asarray(scene.points)
         with sw("table"):
@@ -423,22 +449,16 @@ def register_view(frames: list[RGBDFrame], config: StaticConfig | None = None) -
             )
         with sw("object"):
             obj = scene.select_by_index(np.flatnonzero(iso.mask))
-            if len(obj.points) == 0:
-                raise NoObjectError("the selected cluster is empty")
             estimate_normals(obj, cfg.output_voxel * 2.5, toward=viewpoint)
-            obj_xyz = np.asarray(obj.points)
-            centre, height = footprint_centre(obj_xyz, table.plane)
-            from services.registration.cloud import from_o3d
-
+            centre, height = footprint_centre(np.asarray(obj.points), table.plane)
             cloud = from_o3d(obj, frame="base")
-    timings = sw.total()
     return ViewResult(
         object_cloud=cloud,
         table=table.plane,
         object_center=centre,
         object_height=height,
         scans=scan_results,
-        timings=timings,
+        timings=sw.total(),
         profile=cfg.profile,
         seed_point=seed_base,
         scene_points=len(scene_xyz),

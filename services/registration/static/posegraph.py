@@ -28,9 +28,7 @@ def optimise(
     for pose in initial:
         graph.nodes.append(reg.PoseGraphNode(np.asarray(pose, dtype=np.float64)))
     for s, t, T, info in edges:
-        graph.edges.append(
-            reg.PoseGraphEdge(s, t, np.asarray(T, dtype=np.float64), np.asarray(info), uncertain=False)
-        )
+        graph.edges.append(reg.PoseGraphEdge(s, t, np.asarray(T, dtype=np.float64), np.asarray(info), uncertain=False))
     option = reg.GlobalOptimizationOption(
         max_correspondence_distance=max_corr,
         edge_prune_threshold=0.25,

@@ -27,6 +27,7 @@ class ScanResult:
     T_base_camera: np.ndarray  # corrected
     T_base_camera_believed: np.ndarray
     path: str
+    method: str  # anchor | rgbd_odometry | icp | fpfh+icp | paper
     fitness: float
     inlier_rmse: float
     verified: bool
