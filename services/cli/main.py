@@ -15,6 +15,7 @@ COMMANDS = [
     "services.cli.cmd_status",
     "services.cli.cmd_call",
     "services.cli.cmd_bench",
+    "services.cli.cmd_scan",
 ]
 
 

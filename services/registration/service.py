@@ -49,8 +49,8 @@ class RegistrationService(Service):
         return view_result_message(msg.view, result)
 
     async def pair(self, msg: Message | None, ctx: QueryContext) -> Message:
-        from services.registration.pair_wire import pair_job_from_message, pair_result_message
         from services.registration.dynamic.pair import register_pair
+        from services.registration.pair_wire import pair_job_from_message, pair_result_message
 
         job = pair_job_from_message(msg)
         result = await self.run_cpu(register_pair, job)

@@ -1,0 +1,145 @@
+"""``objscan scan``: one whole acquisition, with a live progress bar; starts the services it needs.
+
+With no cell running it starts the embedded default (a router on loopback and every service as its own
+process, sim backends) and stops what it started at the end. ``--resume SESSION_DIR`` continues a session
+whose orchestrator was killed or stopped, re-using every frame already captured.
+"""
+
+from __future__ import annotations
+
+import json
+import queue
+import signal
+import socket
+import time
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+from common import keys
+from common.client import live_services, request_sync
+from common.codec import decode
+from common.errors import ObjscanError
+from common.launcher import ServiceGroup
+from common.messages import Ok, Request
+from common.zenoh_config import DEFAULT_ROUTER_PORT
+from services.cli.cells import SERVICE_MODULES, cell_specs
+
+console = Console()
+
+
+def register(sub) -> None:  # noqa: ANN001
+    p = sub.add_parser("scan", help="run a whole acquisition: views, grasps, turns, model",
+                       description="Acquire a model of an object: 12 views 30 degrees apart by default. Starts "
+                                   "the services (sim backends) when none are running.")
+    p.add_argument("--object", default="milk", help="HOPE object name or mesh path (sim) (default: %(default)s)")
+    p.add_argument("--views", type=int, default=12)
+    p.add_argument("--profile", default="robot-turned", choices=["ideal", "hand-turned", "robot-turned"],
+                   help="sim error profile (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--width", type=int, default=640)
+    p.add_argument("--height", type=int, default=480)
+    p.add_argument("--out", help="session folder (default: sessions/<object>-<time>)")
+    p.add_argument("--resume", metavar="SESSION_DIR", help="continue an interrupted session")
+    p.add_argument("--backend", choices=["sim", "real"], default="sim",
+                   help="hardware backends when services must be started (default: %(default)s)")
+    p.add_argument("--port", type=int, default=DEFAULT_ROUTER_PORT, help="router port of the cell")
+    p.add_argument("--force-first-slip", action="store_true", help="sim: make the first grasp slip")
+    p.add_argument("--robot", default=keys.DEFAULT_ROBOT)
+    p.set_defaults(func=run)
+
+
+def _router_listening(port: int) -> bool:
+    with socket.socket() as s:
+        s.settimeout(0.5)
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+def ensure_cell(port: int, backend: str, log_dir: Path) -> ServiceGroup:
+    """Join the cell on ``port``; start the router and whatever services are missing."""
+    group = ServiceGroup(port, log_dir=log_dir, start_router=not _router_listening(port))
+    if not _router_listening(port):
+        group.start_router()
+    live = {s for s, _ in live_services(group.session, timeout=1.0)}
+    needed = [s for s in SERVICE_MODULES if s not in live and not (s == "sim" and backend == "real")]
+    if needed:
+        console.print(f"starting services: {', '.join(needed)} (logs in {log_dir})")
+        group.launch(cell_specs(needed, backend=backend), timeout=180)
+    return group
+
+
+def run(args) -> int:  # noqa: ANN001
+    t0 = time.time()
+    session_dir = Path(args.resume or args.out or f"sessions/{Path(args.object).stem}-{time.strftime('%Y%m%d-%H%M%S')}")
+    session_dir = session_dir.resolve()
+    with ensure_cell(args.port, args.backend, session_dir / "logs") as group:
+        session = group.session
+        updates: queue.Queue[dict[str, Any]] = queue.Queue()
+
+        def on_status(sample) -> None:  # noqa: ANN001 - zenoh thread: decode and hand over
+            try:
+                msg = decode(sample.payload.to_bytes())
+            except ObjscanError:
+                return
+            if isinstance(msg, Ok):
+                updates.put(msg.info)
+
+        sub = session.declare_subscriber(keys.orchestrator(args.robot, "status"), on_status)
+        params: dict[str, Any]
+        if args.resume:
+            params = {"resume": str(session_dir)}
+        else:
+            params = {"out": str(session_dir), "config": {
+                "object": args.object, "views": args.views, "profile": args.profile, "seed": args.seed,
+                "width": args.width, "height": args.height, "force_first_slip": args.force_first_slip}}
+        reply = request_sync(session, keys.orchestrator(args.robot, "run"), Request(params=params), timeout=30)
+        console.print(f"session: {reply.info['session']}" + (" (resumed)" if reply.info.get("resumed") else ""))
+        stop_sent = False
+
+        def on_sigint(*_: object) -> None:
+            nonlocal stop_sent
+            if not stop_sent:
+                stop_sent = True
+                console.print("[yellow]stopping: e-stop sent to the arm[/yellow]")
+                request_sync(session, keys.orchestrator(args.robot, "stop"), timeout=10)
+
+        signal.signal(signal.SIGINT, on_sigint)
+        final = _follow(updates, args.views if not args.resume else None)
+        sub.undeclare()
+    return _summary(final, session_dir, time.time() - t0)
+
+
+def _follow(updates: queue.Queue[dict[str, Any]], views: int | None) -> dict[str, Any]:
+    last: dict[str, Any] = {}
+    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} views"),
+                  TimeElapsedColumn(), console=console) as progress:
+        task = progress.add_task("starting", total=views or 12)
+        while True:
+            try:
+                status = updates.get(timeout=1.0)
+            except queue.Empty:
+                continue
+            last = status
+            progress.update(task, total=status.get("views", views or 12), completed=status.get("views_done", 0),
+                            description=f"view {status.get('view', 0)}: {status.get('state')}"
+                                        + (f" (attempts {status['attempts']})" if status.get("attempts") else ""))
+            if status.get("status") in ("done", "failed", "stopped"):
+                return last
+
+
+def _summary(final: dict[str, Any], session_dir: Path, seconds: float) -> int:
+    status = final.get("status")
+    if status == "done":
+        console.print(f"[green]done[/green] in {seconds:.0f} s. model: {final.get('model')}")
+        acc = final.get("accuracy")
+        if acc:
+            console.print("accuracy against ground truth: " + ", ".join(
+                f"{k} {v:.3f}" for k, v in acc.items()))
+        console.print(f"report: {session_dir / 'report.json'}")
+        return 0
+    err = final.get("last_error") or {}
+    console.print(f"[red]{status}[/red] in state {final.get('state')}: {json.dumps(err)}")
+    console.print(f"resume with: objscan scan --resume {session_dir}")
+    return 1

@@ -1,0 +1,99 @@
+"""The orchestrator's view of the robot cell: one async method per service call.
+
+It knows keys and message types, nothing about the acquisition's logic; the state machine talks only to
+this, so the same machine drives the simulated cell, the real one or a replay.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Awaitable, Callable
+from typing import Any
+
+import numpy as np
+
+from common import keys
+from common.api import (
+    CaptureRequest,
+    DynamicRequest,
+    GraspPlanReply,
+    GraspRequest,
+    GripperRequest,
+    GripperResult,
+    ModelResult,
+    MoveRequest,
+    MoveResult,
+    SceneRequest,
+    StaticRequest,
+    ViewResult,
+)
+from common.codec import Message
+from common.errors import RemoteError
+from common.messages import Ok, Plane, PointCloud, Request, RGBDFrame
+
+Requester = Callable[..., Awaitable[Message]]
+
+MOVE_TIMEOUT_S = 120.0
+COMPUTE_TIMEOUT_S = 600.0
+
+
+def _expect(reply: Message, cls: type) -> Any:
+    if not isinstance(reply, cls):
+        raise RemoteError(f"expected {cls.__name__}, got {type(reply).__name__}", code="bad_reply")
+    return reply
+
+
+class Cell:
+    """Async calls to the services of one robot cell (``robot``) and the shared compute services."""
+
+    def __init__(self, request: Requester, robot: str):
+        self._request = request
+        self.robot = robot
+
+    async def move(self, kind: str, *, target: np.ndarray | None = None, q: np.ndarray | None = None,
+                   frame: str = "gripper", speed: float = 0.5, free_roll: bool = False,
+                   contact: bool = False, dry_run: bool = False) -> MoveResult:
+        msg = MoveRequest(kind=kind, target=target, q=q, frame=frame, speed_scale=speed, free_roll=free_roll,
+                          allow_object_contact=contact, dry_run=dry_run)
+        return _expect(await self._request(keys.arm(self.robot, "move"), msg, timeout=MOVE_TIMEOUT_S), MoveResult)
+
+    async def gripper(self, opening: float, force: float = 30.0) -> GripperResult:
+        reply = await self._request(keys.arm(self.robot, "gripper"), GripperRequest(opening=opening, force=force),
+                                    timeout=MOVE_TIMEOUT_S)
+        return _expect(reply, GripperResult)
+
+    async def set_object_box(self, center: np.ndarray, extent: np.ndarray) -> None:
+        await self._request(keys.arm(self.robot, "scene"), SceneRequest(center=center, extent=extent), timeout=10.0)
+
+    async def clear_object_box(self) -> None:
+        await self.set_object_box(np.zeros(3), np.zeros(3))
+
+    async def estop(self) -> None:
+        await self._request(keys.arm(self.robot, "stop"), timeout=5.0)
+
+    async def reset_estop(self) -> None:
+        await self._request(keys.arm(self.robot, "stop"), Request(params={"reset": True}), timeout=5.0)
+
+    async def capture(self, width: int, height: int) -> RGBDFrame:
+        reply = await self._request(keys.camera_capture(self.robot), CaptureRequest(width=width, height=height),
+                                    timeout=60.0)
+        return _expect(reply, RGBDFrame)
+
+    async def register_static(self, frames: list[RGBDFrame], view: int, profile: str) -> ViewResult:
+        reply = await self._request(keys.REGISTRATION_STATIC, StaticRequest(frames=frames, profile=profile, view=view),
+                                    timeout=COMPUTE_TIMEOUT_S)
+        return _expect(reply, ViewResult)
+
+    async def plan_grasps(self, cloud: PointCloud, table: Plane, mode: str) -> GraspPlanReply:
+        reply = await self._request(keys.GRASP_PLAN, GraspRequest(cloud=cloud, table=table, mode=mode), timeout=60.0)
+        return _expect(reply, GraspPlanReply)
+
+    async def build_model(self, views: list[ViewResult], turns_deg: list[float], config: dict) -> ModelResult:
+        reply = await self._request(keys.REGISTRATION_DYNAMIC,
+                                    DynamicRequest(views=views, turns_deg=turns_deg, config=config),
+                                    timeout=COMPUTE_TIMEOUT_S * 2)
+        return _expect(reply, ModelResult)
+
+    # ---------------------------------------------------------------------------- digital twin only
+    async def sim(self, op: str, **params: Any) -> dict[str, Any]:
+        reply = await self._request(keys.sim(self.robot, "world"), Request(params={"op": op, **params}), timeout=60.0)
+        return _expect(reply, Ok).info

@@ -1,0 +1,419 @@
+"""The acquisition state machine: locate → (scan → register → plan grasp → turn) × views → model → done.
+
+States and their allowed transitions are declared in ``TRANSITIONS`` (drawn in docs/orchestrator.md); a
+transition outside it is a bug and stops the run. Every state's outputs are written to the session folder
+and the journal before the next state starts, so a killed orchestrator resumes at the state it was in
+and re-uses every frame already captured (scans are never captured twice, and never overwritten: a
+re-scan first moves the old attempt aside).
+
+Recovery, as a robot on a real table needs it:
+- an unreachable or colliding motion tries the grasp's next angular offset, then the next grasp;
+- a failed grasp (slip, nothing between the pads) opens, backs off, re-scans and re-plans;
+- frontal grasps that all fail to execute fall back to top-down ones;
+- after ``max_rescans`` of one view the arm goes home with the gripper open and the run ends with a reason;
+- an e-stop from anywhere halts the arm at once and parks the machine in ``stopped`` (resumable).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import shutil
+import time
+from collections.abc import Callable
+from enum import Enum
+from typing import Any
+
+import numpy as np
+
+from common.api import GraspPlanReply, ViewResult
+from common.errors import ObjscanError, RemoteError
+from common.log import event
+from common.messages import Grasp
+from common.session_folder import view_dir
+from services.orchestrator.cell import Cell
+from services.orchestrator.config import AcquisitionConfig
+from services.orchestrator.planning import TurnPoses, look_pose, object_box, scan_pose_candidates, turn_sequences
+from services.orchestrator.store import SessionStore
+
+log = logging.getLogger("objscan.orchestrator")
+
+DEFAULT_WORKSPACE_CENTER = np.array([0.36, 0.0, 0.0])
+SCANS_PER_VIEW = 3
+
+
+class State(str, Enum):
+    LOCATE = "locate"
+    SCAN = "scan"
+    REGISTER = "register"
+    PLAN_GRASP = "plan_grasp"
+    TURN = "turn"
+    MODEL = "model"
+    DONE = "done"
+    FAILED = "failed"
+    STOPPED = "stopped"
+
+
+TRANSITIONS: dict[State, set[State]] = {
+    State.LOCATE: {State.SCAN},
+    State.SCAN: {State.REGISTER},
+    State.REGISTER: {State.PLAN_GRASP, State.MODEL, State.SCAN},
+    State.PLAN_GRASP: {State.TURN, State.SCAN},
+    State.TURN: {State.SCAN, State.PLAN_GRASP},
+    State.MODEL: {State.DONE},
+}
+TERMINAL = {State.DONE, State.FAILED, State.STOPPED}
+
+
+class AcquisitionFailed(ObjscanError):
+    """The acquisition cannot go on (e.g. no grasp after every re-scan); the reason is in the message."""
+
+    code = "acquisition_failed"
+
+
+class GraspFailed(ObjscanError):
+    """A grasp did not hold the object (slip, nothing between the pads)."""
+
+    code = "grasp_failed"
+
+
+class Acquisition:
+    """One acquisition over a ``Cell``, persisted in a ``SessionStore``; ``run()`` drives it to the end."""
+
+    def __init__(self, cell: Cell, store: SessionStore, config: AcquisitionConfig,
+                 on_status: Callable[[dict[str, Any]], None] | None = None):
+        self.cell = cell
+        self.store = store
+        self.config = config
+        self.on_status = on_status or (lambda _s: None)
+        self.stop_requested = asyncio.Event()
+        journal = store.load_journal()
+        self.resumed = journal is not None
+        self.j: dict[str, Any] = journal or {
+            "version": 1, "config": config.to_dict(), "state": State.LOCATE.value, "view": 0, "status": "running",
+            "turns_deg": [0.0], "centers": {}, "heights": {}, "rescans": {}, "grasp_mode": "auto",
+            "scan_sets": {}, "decisions": [], "timings_s": {}, "counters": {"captures": 0, "grasp_attempts": 0,
+                                                                             "slips": 0, "rescans": 0},
+            "started": time.time(), "simulated": None, "error": None,
+        }
+        if self.resumed:
+            self.config = AcquisitionConfig.from_dict(self.j["config"])
+            self.decide("resumed", state=self.j["state"], view=self.j["view"])
+        self._plan: GraspPlanReply | None = None
+
+    # -------------------------------------------------------------------------------- bookkeeping
+    @property
+    def state(self) -> State:
+        return State(self.j["state"])
+
+    @property
+    def view(self) -> int:
+        return int(self.j["view"])
+
+    def decide(self, what: str, **detail: Any) -> None:
+        """Record a decision (and log it): the journal says why the run went the way it did."""
+        entry = {"t": round(time.time() - self.j["started"], 3), "state": self.j["state"], "view": self.j["view"],
+                 "what": what, **{k: v for k, v in detail.items()}}
+        self.j["decisions"].append(entry)
+        event(log, what, view=self.j["view"], **{k: v for k, v in detail.items() if not isinstance(v, (dict, list))})
+
+    def status(self) -> dict[str, Any]:
+        views_done = sum(1 for k in range(self.config.views) if self.store.has_view(k))
+        return {"state": self.j["state"], "view": self.view, "views": self.config.views, "views_done": views_done,
+                "status": self.j["status"], "attempts": self.j["counters"]["grasp_attempts"],
+                "rescans": self.j["counters"]["rescans"], "last_error": self.j.get("error"),
+                "session": str(self.store.path), "elapsed_s": round(time.time() - self.j["started"], 1),
+                "model": self.j.get("model_path"), "accuracy": self.j.get("accuracy")}
+
+    def _persist(self) -> None:
+        self.store.save_journal(self.j)
+        turns = self.j["turns_deg"]
+        views_done = sum(1 for k in range(len(turns)) if self.store.has_view(k) or self.store.has_scan(k, 0))
+        self.store.write_session_info(self.j["config"], max(views_done, 1), turns,
+                                      {"simulated": self.j.get("simulated")})
+        self.on_status(self.status())
+
+    def _go(self, nxt: State) -> None:
+        cur = self.state
+        if nxt not in TERMINAL and nxt not in TRANSITIONS.get(cur, set()):
+            raise AcquisitionFailed(f"internal error: no transition {cur.value} -> {nxt.value}")
+        self.j["state"] = nxt.value
+        self._persist()
+
+    # -------------------------------------------------------------------------------- main loop
+    async def run(self) -> dict[str, Any]:
+        handlers = {State.LOCATE: self.locate, State.SCAN: self.scan, State.REGISTER: self.register,
+                    State.PLAN_GRASP: self.plan_grasp, State.TURN: self.turn, State.MODEL: self.model}
+        if self.state == State.STOPPED:  # resuming after an e-stop
+            self.j["state"] = self.j.get("stopped_in", State.SCAN.value)
+            await self.cell.reset_estop()
+        if self.state in (State.FAILED, State.DONE):
+            return self.status()
+        self.j["status"] = "running"
+        await self._prepare_cell()
+        self._persist()
+        try:
+            while self.state not in TERMINAL:
+                if self.stop_requested.is_set():
+                    raise asyncio.CancelledError
+                state = self.state
+                t0 = time.perf_counter()
+                nxt = await handlers[state]()
+                self.j["timings_s"][state.value] = round(self.j["timings_s"].get(state.value, 0.0)
+                                                         + time.perf_counter() - t0, 3)
+                self._go(nxt)
+            self.j["status"] = "done"
+        except asyncio.CancelledError:
+            self.j["stopped_in"] = self.j["state"]
+            self.j["state"], self.j["status"] = State.STOPPED.value, "stopped"
+            self.decide("stopped", reason="stop requested")
+        except ObjscanError as exc:
+            self.j["error"] = {"code": exc.code, "message": exc.message, "state": self.j["state"]}
+            self.j["state"], self.j["status"] = State.FAILED.value, "failed"
+            self.decide("failed", code=exc.code, message=exc.message)
+            await self._park()
+        self._persist()
+        return self.status()
+
+    async def _prepare_cell(self) -> None:
+        """First start: reset the twin to this session's object/profile/seed (sim cells only)."""
+        if self.j.get("simulated") is None:
+            try:
+                await self.cell.sim("reset", object=self.config.object, profile=self.config.profile,
+                                    seed=self.config.seed)
+                self.j["simulated"] = True
+                if self.config.force_first_slip:
+                    await self.cell.sim("force_slip")
+            except ObjscanError as exc:
+                if exc.code not in ("unavailable", "timeout"):
+                    raise
+                self.j["simulated"] = False
+            self.decide("cell ready", simulated=self.j["simulated"])
+        await self.cell.gripper(0.1, self.config.turn.gripper_force)
+
+    async def _park(self) -> None:
+        """Arm home with the gripper open: the safe state after a failure."""
+        for step in (lambda: self.cell.gripper(0.1), lambda: self.cell.clear_object_box(),
+                     lambda: self.cell.move("home", speed=0.3)):
+            try:
+                await step()
+            except ObjscanError as exc:
+                self.decide("park step failed", code=exc.code, message=exc.message)
+
+    # -------------------------------------------------------------------------------- states
+    async def locate(self) -> State:
+        """Look at the workspace, find the goal object (cluster nearest the image centre), estimate it."""
+        T = look_pose(DEFAULT_WORKSPACE_CENTER, self.config.scan)
+        await self.cell.move("pose", target=T, frame="camera", speed=0.6)
+        frame = await self.cell.capture(self.config.width, self.config.height)
+        self.j["counters"]["captures"] += 1
+        from common.session_folder import write_scan
+
+        write_scan(self.store.path / "locate", 0, 0, frame)
+        result = await self.cell.register_static([frame], view=-1, profile=self.config.static_profile)
+        self._remember_object(-1, result)
+        self.decide("located", center=np.round(result.center, 4).tolist(), height=round(result.height, 4))
+        return State.SCAN
+
+    def _remember_object(self, view: int, result: ViewResult) -> None:
+        self.j["centers"][str(view)] = np.asarray(result.center, float).tolist()
+        self.j["heights"][str(view)] = float(result.height)
+
+    def _object_estimate(self, view: int) -> tuple[np.ndarray, float]:
+        """Best current estimate of the object's footprint centre and height (latest registered view)."""
+        for k in range(view, -2, -1):
+            if str(k) in self.j["centers"]:
+                return np.asarray(self.j["centers"][str(k)]), float(self.j["heights"][str(k)])
+        return DEFAULT_WORKSPACE_CENTER.copy(), 0.1
+
+    async def _reachable_scan_set(self, view: int) -> list[np.ndarray]:
+        key = str(view)
+        if key in self.j["scan_sets"]:
+            return [np.asarray(T) for T in self.j["scan_sets"][key]]
+        center, height = self._object_estimate(view - 1 if view > 0 else -1)
+        reasons = []
+        for candidate in scan_pose_candidates(center, height, self.config.scan):
+            try:
+                for T in candidate:
+                    await self.cell.move("pose", target=T, frame="camera", dry_run=True)
+            except RemoteError as exc:
+                reasons.append(exc.code)
+                continue
+            self.j["scan_sets"][key] = [T.tolist() for T in candidate]
+            return candidate
+        raise AcquisitionFailed("no reachable set of scan poses around the object",
+                                detail={"center": center.tolist(), "reasons": reasons[:6]})
+
+    async def scan(self) -> State:
+        k = self.view
+        poses = await self._reachable_scan_set(k)
+        for j, T in enumerate(poses):
+            if self.store.has_scan(k, j):
+                continue  # captured before a restart: never capture twice
+            moved = await self.cell.move("pose", target=T, frame="camera", speed=0.6)
+            frame = await self.cell.capture(self.config.width, self.config.height)
+            self.j["counters"]["captures"] += 1
+            self.store.save_scan(k, j, frame, {"joints": {"position": moved.q.tolist()}, "view": k, "scan": j,
+                                               "commanded_turn_deg": self.j["turns_deg"][k]})
+            self._persist()
+        return State.REGISTER
+
+    async def register(self) -> State:
+        k = self.view
+        if not self.store.has_view(k):
+            frames = [self.store.load_scan(k, j) for j in range(SCANS_PER_VIEW)]
+            try:
+                result = await self.cell.register_static(frames, view=k, profile=self.config.static_profile)
+            except RemoteError as exc:
+                self.decide("static registration failed", code=exc.code, message=exc.message)
+                return await self._rescan(k, f"registration failed: {exc.code}")
+            self.store.save_view(result)
+            self._remember_object(k, result)
+            self.decide("view registered", points=len(result.cloud),
+                        seconds=result.figures.get("timings_s", {}).get("total"))
+        if k >= self.config.views - 1:
+            return State.MODEL
+        return State.PLAN_GRASP
+
+    async def _rescan(self, k: int, reason: str) -> State:
+        n = int(self.j["rescans"].get(str(k), 0)) + 1
+        if n > self.config.max_rescans:
+            raise AcquisitionFailed(f"view {k}: giving up after {n - 1} re-scans ({reason})")
+        self.j["rescans"][str(k)] = n
+        self.j["counters"]["rescans"] += 1
+        src = view_dir(self.store.path, k)
+        if src.exists():  # keep every captured frame: the old attempt moves aside
+            shutil.move(str(src), str(src.with_name(f"{src.name}_attempt{n}")))
+        self.j["scan_sets"].pop(str(k), None)
+        self.decide("re-scan", reason=reason, rescan=n)
+        return State.SCAN
+
+    async def plan_grasp(self) -> State:
+        k = self.view
+        view = self.store.load_view(k)
+        mode = self.j.get("grasp_mode", "auto")
+        plan = await self.cell.plan_grasps(view.cloud, view.table, mode)
+        self.store.save_json(f"view_{k:02d}/grasps_{mode}.json", {
+            "mode": mode, "explanation": plan.explanation, "seconds": plan.seconds, "rejections": plan.rejections,
+            "grasps": [{"kind": g.kind, "rank": g.rank, "width": g.width, "metrics": g.metrics} for g in plan.grasps]})
+        self.decide("grasps planned", mode=mode, n=len(plan.grasps), explanation=plan.explanation)
+        if not plan.grasps:
+            if mode == "auto":
+                self.j["grasp_mode"] = "top_down"
+                return await self._rescan(k, "no grasp found")
+            return await self._rescan(k, "no grasp found (top-down)")
+        self._plan = plan
+        return State.TURN
+
+    async def turn(self) -> State:
+        k = self.view
+        if self._plan is None:  # resumed here: the plan is re-made from the registered view
+            return State.PLAN_GRASP
+        cfg = self.config
+        view = self.store.load_view(k)
+        box_c, box_e = object_box(view.center, view.height, view.cloud.xyz, cfg.turn.object_box_margin)
+        failures: list[str] = []
+        attempts = 0
+        for gi, grasp in enumerate(self._plan.grasps):
+            for seq in turn_sequences(grasp, cfg.turn):
+                if attempts >= cfg.max_grasp_attempts:
+                    break
+                attempts += 1
+                self.j["counters"]["grasp_attempts"] += 1
+                try:
+                    await self._execute_turn(grasp, seq, box_c, box_e)
+                except GraspFailed as exc:
+                    self.j["counters"]["slips"] += 1
+                    self.decide("grasp failed", grasp=gi, pose=seq.name, reason=exc.message)
+                    self._plan = None
+                    self.j["grasp_mode"] = "auto"
+                    return await self._rescan(k, f"grasp failed: {exc.message}")
+                except RemoteError as exc:
+                    failures.append(f"{seq.name}:{exc.code}")
+                    self.decide("grasp pose not executable", grasp=gi, pose=seq.name, code=exc.code,
+                                message=exc.message[:200])
+                    continue
+                self.decide("turned", grasp=gi, pose=seq.name, kind=grasp.kind)
+                self.j["turns_deg"].append(self.j["turns_deg"][k] + cfg.turn_deg)
+                self.j["view"] = k + 1
+                self.j["grasp_mode"] = "auto"
+                self._plan = None
+                return State.SCAN
+        self._plan = None
+        if self.j.get("grasp_mode", "auto") != "top_down":
+            self.j["grasp_mode"] = "top_down"
+            self.decide("falling back to top-down grasps", failures=failures[:8])
+            return State.PLAN_GRASP
+        self.j["grasp_mode"] = "auto"
+        return await self._rescan(k, "no executable grasp")
+
+    async def _execute_turn(self, grasp: Grasp, seq: TurnPoses, box_c: np.ndarray, box_e: np.ndarray) -> None:
+        """Pick, lift, turn about the table normal, set down, release, retreat. Raises on failure.
+
+        Motions before the gripper closes may fail harmlessly (RemoteError: the caller tries the next pose);
+        a failure while holding sets the object back down where it was before re-raising.
+        """
+        c, m = self.cell, self.config.turn
+        opening = min(0.105, grasp.width + m.open_margin)
+        await c.gripper(opening, m.gripper_force)
+        await c.set_object_box(box_c, box_e)
+        await c.move("pose", target=seq.pregrasp, speed=m.speed_scale)
+        await c.move("linear", target=seq.grasp, speed=m.approach_speed_scale, contact=True)
+        held = await c.gripper(0.0, m.gripper_force)
+        if not held.holding:
+            await c.gripper(opening, m.gripper_force)
+            await c.move("linear", target=seq.pregrasp, speed=m.approach_speed_scale, contact=True)
+            raise GraspFailed(held.reason or "nothing between the pads")
+        await c.clear_object_box()
+        try:
+            await c.move("linear", target=seq.lifted, speed=m.approach_speed_scale, contact=True)
+            await c.move("pose", target=seq.turned_lifted, speed=m.approach_speed_scale, contact=True)
+            await c.move("linear", target=seq.turned, speed=m.approach_speed_scale, contact=True)
+        except RemoteError:
+            try:  # put it back where it stood, then let the caller try another pose
+                await c.move("linear", target=seq.grasp, speed=m.approach_speed_scale, contact=True)
+            finally:
+                await c.gripper(opening, m.gripper_force)
+            await c.move("linear", target=seq.pregrasp, speed=m.approach_speed_scale, contact=True)
+            raise
+        await c.gripper(opening, m.gripper_force)
+        await c.move("linear", target=seq.retreat, speed=m.approach_speed_scale, contact=True)
+        await c.set_object_box(box_c, box_e)
+
+    async def model(self) -> State:
+        n = self.config.views
+        views = [self.store.load_view(k) for k in range(n)]
+        turns = [float(t) for t in self.j["turns_deg"][:n]]
+        result = await self.cell.build_model(views, turns, self.config.dynamic_config)
+        path = self.store.save_model(result.cloud)
+        self.j["model_path"] = str(path)
+        report: dict[str, Any] = {"model": str(path), "points": len(result.cloud), "model_figures": result.figures,
+                                  "turns_commanded_deg": turns}
+        if self.config.evaluate and self.j.get("simulated"):
+            report["accuracy"] = await self._evaluate(result.cloud.xyz)
+            self.j["accuracy"] = {k: report["accuracy"][k] for k in ("chamfer_mm", "accuracy_mm", "completeness_mm",
+                                                                      "fscore_2mm", "fscore_5mm")
+                                  if k in report["accuracy"]}
+        self.decide("model built", points=len(result.cloud), accuracy=self.j.get("accuracy"))
+        report.update({"session": str(self.store.path), "config": self.j["config"], "counters": self.j["counters"],
+                       "timings_s": self.j["timings_s"], "seconds_total": round(time.time() - self.j["started"], 2),
+                       "decisions": self.j["decisions"],
+                       "views": [self.store.load_json(f"view_{k:02d}/view.json").get("figures", {}) for k in range(n)]})
+        self.store.save_json("report.json", report)
+        await self._park()
+        return State.DONE
+
+    async def _evaluate(self, model_xyz: np.ndarray) -> dict[str, Any]:
+        """Chamfer/F-score against the twin's ground-truth surface, posed as the object stood in view 0."""
+        from services.registration.evaluation import evaluate_model
+
+        first = self.store.load_scan(0, 0)
+        T0 = first.meta.get("T_base_object_true")
+        gt = await self.cell.sim("gt_points", n=60000)
+        xyz = np.asarray(gt["xyz"], float)
+        T_now = np.asarray(gt["T_base_object"], float)
+        if T0 is not None:
+            T0 = np.asarray(T0, float)
+            xyz = (xyz - T_now[:3, 3]) @ T_now[:3, :3] @ T0[:3, :3].T + T0[:3, 3]
+        metrics = await asyncio.to_thread(evaluate_model, np.asarray(model_xyz, float), xyz)
+        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in metrics.items()}

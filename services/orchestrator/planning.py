@@ -1,0 +1,105 @@
+"""Pure geometry of an acquisition: where the camera goes, and the poses of one pick-turn-place.
+
+No I/O here, so the choices can be tested and reasoned about without a robot.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from common.geometry import look_at
+from common.messages import Grasp
+from services.orchestrator.config import ScanGeometry, TurnMotion
+
+
+def camera_pose_looking_at(target: np.ndarray, distance: float, elevation_deg: float, azimuth_deg: float
+                           ) -> np.ndarray:
+    """T_base_camera at ``distance`` from ``target``, ``elevation`` above its horizon, image upright."""
+    el, az = np.radians(elevation_deg), np.radians(azimuth_deg)
+    eye = np.asarray(target, dtype=float) + distance * np.array(
+        [np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    return look_at(eye, target, (0.0, 0.0, 1.0))
+
+
+def arm_side_azimuth_deg(center: np.ndarray) -> float:
+    """Azimuth (deg, about base z) from the object toward the arm base: the side the camera can reach."""
+    return float(np.degrees(np.arctan2(-center[1], -center[0])))
+
+
+def scan_pose_candidates(center: np.ndarray, height: float, geometry: ScanGeometry) -> list[list[np.ndarray]]:
+    """Sets of 3 scan poses (T_base_camera) around the object, most preferred first."""
+    target = np.array([center[0], center[1], max(height, 0.02) * 0.5])
+    base_az = arm_side_azimuth_deg(center)
+    sets = []
+    for distance in geometry.distances:
+        for elevation in geometry.elevations_deg:
+            sets.append([camera_pose_looking_at(target, distance, elevation, base_az + off)
+                         for off in geometry.azimuth_offsets_deg])
+    return sets
+
+
+def look_pose(center_guess: np.ndarray, geometry: ScanGeometry) -> np.ndarray:
+    """The locate pose: looking at where the object should be, from high enough to see the table."""
+    target = np.array([center_guess[0], center_guess[1], 0.05])
+    return camera_pose_looking_at(target, geometry.look_distance, geometry.look_elevation_deg,
+                                  arm_side_azimuth_deg(center_guess))
+
+
+@dataclass
+class TurnPoses:
+    """The T_base_gripper waypoints of one pick-turn-place with a given angular offset of a grasp."""
+
+    name: str
+    pregrasp: np.ndarray
+    grasp: np.ndarray
+    lifted: np.ndarray
+    turned_lifted: np.ndarray
+    turned: np.ndarray
+    retreat: np.ndarray
+
+
+def _lift(T: np.ndarray, dz: float) -> np.ndarray:
+    out = T.copy()
+    out[2, 3] += dz
+    return out
+
+
+def turn_sequences(grasp: Grasp, motion: TurnMotion) -> list[TurnPoses]:
+    """For each angular offset of ``grasp`` (best first), its full pick-turn-place waypoints.
+
+    The turn poses come from the planner (turn about the table normal through the object's centre); the
+    retreat backs off from the turned grasp as far as the pre-grasp was from the grasp.
+    """
+    poses = {name: p.matrix() for name, p in grasp.poses.items()}
+    out = []
+    for name in sorted((n for n in poses if n.startswith("grasp")), key=_offset_order):
+        suffix = name[len("grasp"):]
+        pre, turn = poses.get("pregrasp" + suffix), poses.get("turn" + suffix)
+        if pre is None or turn is None:
+            continue
+        g = poses[name]
+        back = pre[:3, 3] - g[:3, 3]
+        retreat = turn.copy()
+        retreat[:3, 3] = turn[:3, 3] + turn[:3, :3] @ (g[:3, :3].T @ back)
+        out.append(TurnPoses(name=name, pregrasp=pre, grasp=g, lifted=_lift(g, motion.lift),
+                             turned_lifted=_lift(turn, motion.lift), turned=turn, retreat=retreat))
+    return out
+
+
+def _offset_order(name: str) -> tuple[int, int]:
+    """grasp first, then ±15, ±30, ... (plus before minus), as the planner intends."""
+    if name == "grasp":
+        return (0, 0)
+    digits = "".join(ch for ch in name if ch.isdigit())
+    return (int(digits or 0), 0 if "plus" in name else 1)
+
+
+def object_box(center: np.ndarray, height: float, cloud_xyz: np.ndarray, margin: float
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """(centre, extent) of an axis-aligned box around the object for collision checks."""
+    xy = np.asarray(cloud_xyz)[:, :2]
+    lo, hi = xy.min(axis=0) - margin, xy.max(axis=0) + margin
+    c = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (height + margin) / 2])
+    return c, np.array([hi[0] - lo[0], hi[1] - lo[1], height + margin])

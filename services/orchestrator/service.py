@@ -1,0 +1,92 @@
+"""The orchestrator's Zenoh face.
+
+- ``orchestrator/run`` (``Request``: ``config`` map, ``out`` folder, or ``resume`` folder) → starts one
+  acquisition in the background and answers at once with its session folder;
+- ``orchestrator/status``: queryable and a stream (published at every step) of state, view, attempts,
+  last error, model path and accuracy;
+- ``orchestrator/stop``: halts the arm at once and parks the acquisition in ``stopped`` (resumable).
+"""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+from typing import Any
+
+from common import keys
+from common.codec import Message
+from common.errors import InvalidRequest, ObjscanError
+from common.messages import Ok, Request
+from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from services.orchestrator.cell import Cell
+from services.orchestrator.config import AcquisitionConfig
+from services.orchestrator.machine import Acquisition
+from services.orchestrator.store import SessionStore
+
+
+class OrchestratorService(Service):
+    name = "orchestrator"
+
+    async def setup(self) -> None:
+        self.sessions_root = Path(self.settings.options.get("sessions", "sessions"))
+        self.cell = Cell(self.request, self.robot)
+        self.current: Acquisition | None = None
+        self.task: asyncio.Task[Any] | None = None
+        self.last_status: dict[str, Any] = {"state": "idle", "status": "idle"}
+        r = self.robot
+        self.status_pub = self.publisher(keys.orchestrator(r, "status"))
+        self.queryable(keys.orchestrator(r, "run"), self.run_acquisition)
+        self.queryable(keys.orchestrator(r, "status"), self.status)
+        self.queryable(keys.orchestrator(r, "stop"), self.stop_acquisition)
+
+    def _publish(self, status: dict[str, Any]) -> None:
+        self.last_status = status
+        self.status_pub.put(Ok(info=status))
+
+    async def run_acquisition(self, msg: Message | None, ctx: QueryContext) -> Ok:
+        if self.task is not None and not self.task.done():
+            raise ObjscanError("an acquisition is already running", code="busy",
+                               detail={"session": str(self.current.store.path) if self.current else None})
+        params = msg.params if isinstance(msg, Request) else {}
+        if params.get("resume"):
+            path = Path(params["resume"])
+            store = SessionStore(path)
+            if store.load_journal() is None:
+                raise InvalidRequest(f"{path} has no journal.json to resume from")
+            config = AcquisitionConfig()
+        else:
+            out = params.get("out")
+            path = Path(out) if out else self.sessions_root / f"session-{int(asyncio.get_running_loop().time())}"
+            if (path / "journal.json").exists():
+                raise InvalidRequest(f"{path} already holds a session; use resume or another folder")
+            store = SessionStore(path)
+            config = AcquisitionConfig.from_dict(params.get("config", {}))
+        self.current = Acquisition(self.cell, store, config, on_status=self._publish)
+        self.task = self.spawn(self.current.run())
+        return Ok(info={"session": str(path.resolve()), "resumed": self.current.resumed})
+
+    async def status(self, msg: Message | None, ctx: QueryContext) -> Ok:
+        return Ok(info=self.current.status() if self.current else self.last_status)
+
+    async def stop_acquisition(self, msg: Message | None, ctx: QueryContext) -> Ok:
+        try:
+            await self.cell.estop()
+        finally:
+            if self.current is not None:
+                self.current.stop_requested.set()
+            if self.task is not None and not self.task.done():
+                self.task.cancel()
+        return Ok(info={"stopped": True})
+
+    def health_info(self) -> dict[str, object]:
+        s = self.current.status() if self.current else self.last_status
+        return {"state": s.get("state"), "view": s.get("view"), "session": s.get("session")}
+
+
+def main() -> None:
+    p = service_arg_parser("objscan orchestrator: the acquisition state machine")
+    p.add_argument("--sessions", default="sessions", help="root folder for new sessions (default: %(default)s)")
+    p.add_argument("--library", default="models", help="model library folder (default: %(default)s)")
+    args = p.parse_args()
+    run_service(lambda: OrchestratorService(settings_from_args(args, sessions=args.sessions,
+                                                               library=args.library)))

@@ -1,0 +1,202 @@
+"""Dynamic registration spread over every live registration worker.
+
+``build_model`` runs in the coordinating worker's executor; its ``map_pairs`` hands each pair job to a
+worker found by liveliness (this one included) over ``registration/worker/{instance}/pair``. One thread
+per worker pulls jobs from a shared queue, so faster workers take more. A worker whose liveliness token
+vanishes, or that stops answering, loses its job back to the queue for another worker; if no worker is
+left the coordinator finishes the remaining jobs itself. Results come back in job order.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from typing import TYPE_CHECKING
+
+import numpy as np
+import zenoh
+
+from common import keys
+from common.api import DynamicRequest, ModelResult
+from common.codec import Message, decode
+from common.errors import InvalidRequest, RemoteError, WireError
+from common.log import event
+from common.messages import PointCloud
+from services.registration.dynamic.model import DynamicConfig, build_model
+from services.registration.dynamic.pair import PairConfig, PairJob, PairResult, register_pair
+from services.registration.dynamic.views import DynamicView
+from services.registration.pair_wire import (
+    PairResultMessage,
+    pair_job_message,
+    pair_result_from_message,
+)
+
+if TYPE_CHECKING:
+    from services.registration.service import RegistrationService
+
+log = logging.getLogger("objscan.registration")
+PAIR_TIMEOUT_S = 600.0
+
+
+class WorkerLost(Exception):
+    """The worker running a job died or went silent; the job goes back to the queue."""
+
+
+class LiveWorkers:
+    """The set of live registration instances, kept current by a liveliness subscriber."""
+
+    def __init__(self, session: zenoh.Session):
+        self._lock = threading.Lock()
+        self.alive: set[str] = set()
+        self._sub = session.liveliness().declare_subscriber(f"{keys.ALIVE_PREFIX}/registration/*", self._on,
+                                                            history=True)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        parsed = keys.parse_alive(str(sample.key_expr))
+        if not parsed:
+            return
+        with self._lock:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self.alive.add(parsed[1])
+            else:
+                self.alive.discard(parsed[1])
+
+    def snapshot(self) -> set[str]:
+        with self._lock:
+            return set(self.alive)
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+def _run_on_worker(session: zenoh.Session, workers: LiveWorkers, instance: str, job: PairJob) -> PairResult:
+    """Send one job to one worker and wait, giving up as soon as the worker vanishes."""
+    done = threading.Event()
+    replies: list[tuple[bool, bytes]] = []
+
+    def on_reply(reply: zenoh.Reply) -> None:
+        replies.append((reply.ok is not None, (reply.ok or reply.err).payload.to_bytes()))
+
+    session.get(keys.registration_worker_pair(instance), zenoh.handlers.Callback(on_reply, done.set),
+                payload=pair_job_message(job).encode(), timeout=PAIR_TIMEOUT_S)
+    while not done.wait(0.25):
+        if instance not in workers.snapshot():
+            raise WorkerLost(instance)
+    if not replies:
+        raise WorkerLost(instance)
+    ok, payload = replies[0]
+    try:
+        msg = decode(payload)
+    except WireError as exc:
+        raise RemoteError(f"worker {instance} sent an undecodable reply", code="bad_reply") from exc
+    if isinstance(msg, PairResultMessage):
+        return pair_result_from_message(msg)
+    code = getattr(msg, "code", "bad_reply")
+    if code in ("shutdown", "unavailable"):
+        raise WorkerLost(instance)
+    raise RemoteError(getattr(msg, "message", "pair job failed"), code=code)
+
+
+def distributed_map(session: zenoh.Session, stats: dict):  # noqa: ANN201 - MapPairs
+    """A ``map_pairs`` for ``build_model`` that spreads jobs over the live workers."""
+
+    def map_pairs(jobs: list[PairJob]) -> list[PairResult]:
+        workers = LiveWorkers(session)
+        try:
+            time.sleep(0.2)  # liveliness history arrives asynchronously
+            pending: queue.Queue[PairJob] = queue.Queue()
+            for job in jobs:
+                pending.put(job)
+            results: dict[int, PairResult] = {}
+            errors: list[BaseException] = []
+            lock = threading.Lock()
+
+            def worker_loop(instance: str) -> None:
+                while not errors:
+                    try:
+                        job = pending.get_nowait()
+                    except queue.Empty:
+                        return
+                    try:
+                        res = _run_on_worker(session, workers, instance, job)
+                    except WorkerLost:
+                        pending.put(job)
+                        with lock:
+                            stats["retried"] = stats.get("retried", 0) + 1
+                        event(log, "worker lost; job re-queued", logging.WARNING, worker=instance, job=job.index)
+                        return
+                    except BaseException as exc:  # a real failure of the job: stop everything
+                        errors.append(exc)
+                        return
+                    with lock:
+                        results[job.index] = res
+                        stats.setdefault("by_worker", {}).setdefault(instance, 0)
+                        stats["by_worker"][instance] += 1
+
+            while len(results) < len(jobs) and not errors:
+                live = sorted(workers.snapshot())
+                if not live:  # nobody left: do the rest here
+                    while not pending.empty():
+                        job = pending.get_nowait()
+                        results[job.index] = register_pair(job)
+                    break
+                threads = [threading.Thread(target=worker_loop, args=(w,), daemon=True) for w in live]
+                for t in threads:
+                    t.start()
+                for t in threads:
+                    t.join()
+            if errors:
+                raise errors[0]
+            return [results[job.index] for job in jobs]
+        finally:
+            workers.close()
+
+    return map_pairs
+
+
+def _views(msg: DynamicRequest) -> list[DynamicView]:
+    out = []
+    for k, (v, turn) in enumerate(zip(msg.views, msg.turns_deg, strict=True)):
+        c = v.cloud
+        out.append(DynamicView(xyz=np.asarray(c.xyz, np.float32),
+                               rgb=np.asarray(c.rgb if c.rgb is not None else np.zeros_like(c.xyz, np.uint8)),
+                               normals=None if c.normals is None else np.asarray(c.normals, np.float32),
+                               table=v.table, center=np.asarray(v.center, float), commanded_turn_deg=float(turn),
+                               index=k))
+    return out
+
+
+def dynamic_config(d: dict) -> DynamicConfig:
+    """A DynamicConfig from a request's map: ``configuration``, ``paper`` (bool), ``model_voxel``, ``pair``."""
+    if d.get("paper"):
+        cfg = DynamicConfig.paper(d.get("configuration", "no_region"))
+    else:
+        cfg = DynamicConfig(configuration=d.get("configuration", "auto"))
+    if "model_voxel" in d:
+        from dataclasses import replace
+
+        cfg = replace(cfg, model_voxel=float(d["model_voxel"]))
+    if isinstance(d.get("pair"), dict):
+        from dataclasses import replace
+
+        cfg = replace(cfg, pair=replace(cfg.pair, **d["pair"]))
+    return cfg
+
+
+async def build_model_distributed(service: RegistrationService, msg: Message | None) -> ModelResult:
+    if not isinstance(msg, DynamicRequest):
+        raise InvalidRequest("expected a DynamicRequest", detail={"got": type(msg).__name__})
+    views = _views(msg)
+    config = dynamic_config(msg.config)
+    stats: dict = {}
+    result = await service.run_cpu(build_model, views, config, distributed_map(service.session, stats))
+    cloud = PointCloud(xyz=np.asarray(result.xyz, np.float32), rgb=np.asarray(result.rgb, np.uint8),
+                       normals=np.asarray(result.normals, np.float32))
+    figures = result.to_json()
+    figures["workers"] = stats
+    return ModelResult(cloud=cloud, figures=figures)
+
+
+__all__ = ["PairConfig", "build_model_distributed", "distributed_map"]
