@@ -147,6 +147,8 @@ def candidate_regions(frame: ObjectFrame, fingertip: float, slice_thickness: flo
             idx = slab[np.all(offset <= half, axis=1)]
             kept = voxel_thin(idx, local, voxel)
             near = slab[np.all(offset <= half + curvature_radius, axis=1)]
+            # thin the neighbourhood so k neighbours span the whole radius whatever the density
+            near = voxel_thin(near, local, 0.25 * curvature_radius)
             curv = surface_variation(local[near], local[kept], curvature_radius)
             regions.append(CandidateRegion(axis_name, side, seed, kept, curv, np.abs(local[kept, 0])))
     return regions, len(slice_idx)

@@ -173,13 +173,14 @@ class GraspPlannerConfig:
 
 
 def _check_positive(cfg: object, exclude: tuple[str, ...]) -> None:
-    """Reject non-finite or non-positive numbers: a zero pad or slice would silently find nothing."""
+    """Reject non-finite numbers, and non-positive ones outside ``exclude``: a zero pad or slice would
+    silently find nothing."""
     for f in fields(cfg):  # type: ignore[arg-type]
-        if f.name in exclude:
-            continue
         value = getattr(cfg, f.name)
         if isinstance(value, bool) or not isinstance(value, int | float):
             continue
-        if not (math.isfinite(value) and value > 0):
+        if not math.isfinite(value):
+            raise GraspConfigError(f"{type(cfg).__name__}.{f.name} must be finite", detail={f.name: value})
+        if f.name not in exclude and value <= 0:
             raise GraspConfigError(f"{type(cfg).__name__}.{f.name} must be a positive number",
                                    detail={f.name: value})

@@ -190,7 +190,9 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
                    rej: Rejections) -> list[PlannedGrasp]:
     top = _object_top(inp.heights)
     crop_bottom = top - cfg.top_down_crop_height
-    keep = np.flatnonzero(inp.heights >= crop_bottom)
+    # contacts closer to the table than twice the clearance cannot be reached by fingertips coming from
+    # above (the pad's own tilt and the clearance eat that margin), so they never become candidates
+    keep = np.flatnonzero(inp.heights >= max(crop_bottom, 2.0 * cfg.table_clearance))
     if len(keep) < MIN_POINTS:
         rej.add("too_few_points", example={"kind": "top_down", "points_in_crop": len(keep)})
         return []
