@@ -118,6 +118,12 @@ class SimObject:
             self._areas = areas
         return self._areas
 
+    def triangle_normals(self) -> np.ndarray:
+        """Unit face normals (T, 3) in the object frame (orientation as the file winds them)."""
+        v = self.vertices[self.triangles]
+        n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-15)
+
     @property
     def surface_area(self) -> float:
         return float(self.triangle_areas().sum())
@@ -153,9 +159,7 @@ class SimObject:
     def gt_point_cloud(self, n: int, seed: int = 0) -> o3d.geometry.PointCloud:
         """Colored, normal-carrying ground-truth cloud in the object frame (Open3D legacy)."""
         pts, tri, bary = self.sample_surface(n, seed)
-        v = self.vertices[self.triangles[tri]]
-        normals = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-        normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+        normals = self.triangle_normals()[tri]
         pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
         pcd.colors = o3d.utility.Vector3dVector(self.surface_colors(tri, bary) / 255.0)
         pcd.normals = o3d.utility.Vector3dVector(normals)

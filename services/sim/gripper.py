@@ -4,7 +4,8 @@ Gripper frame (docs/conventions.md): x = approach, y = across the fingers (closi
 a horizontal approach; the TCP is midway between the pads. A grasp is *sound* when, with the fingers
 open as they approached, neither pad is inside the object or below the table top, the object's surface
 lies between the pads, it is narrower than the opening and wider than the commanded closing, and both
-pads get a real contact patch. The gripper closes symmetrically, so an off-centre object is pushed onto
+pads get a real contact patch (surface facing the pad within 50°, within ``contact_tolerance`` of the
+pad, of at least ``min_contact_area``). The gripper closes symmetrically, so an off-centre object is pushed onto
 the gripper's centre line as it closes.
 """
 
@@ -79,9 +80,10 @@ class GraspChecker:
     both in the object frame, built once."""
 
     def __init__(self, vertices: np.ndarray, triangles: np.ndarray, surface_points: np.ndarray,
-                 surface_area: float, spec: GripperSpec = GripperSpec()):
-        self.spec = spec
+                 surface_normals: np.ndarray, surface_area: float, spec: GripperSpec | None = None):
+        self.spec = spec = spec or GripperSpec()
         self.points = np.asarray(surface_points, dtype=np.float64)
+        self.normals = np.asarray(surface_normals, dtype=np.float64)
         self.area_per_point = float(surface_area) / max(len(self.points), 1)
         self._scene = o3d.t.geometry.RaycastingScene()
         self._scene.add_triangles(o3d.core.Tensor(np.asarray(vertices, dtype=np.float32)),
@@ -111,6 +113,8 @@ class GraspChecker:
         x0, x1 = spec.pad_center_x - spec.pad_length / 2, spec.pad_center_x + spec.pad_length / 2
         in_slab = (p[:, 0] >= x0) & (p[:, 0] <= x1) & (np.abs(p[:, 2]) <= spec.pad_height / 2)
         slab = p[in_slab]
+        # how squarely each surface sample faces the pads (|n . y|): only such surface can bear on a pad
+        facing = np.abs(self.normals[in_slab] @ T_gripper_object[:3, :3][1]) > np.cos(np.radians(50.0))
         half = opening / 2.0
 
         # pads inside the object's volume or cutting its surface: the fingers would have hit it
@@ -127,7 +131,8 @@ class GraspChecker:
             return GraspOutcome(False, "pad_collides_with_object", opening_cmd,
                                 f"a finger pad opened to {opening * 1000:.0f} mm is inside the object"), None
 
-        between = slab[np.abs(slab[:, 1]) < half]
+        inside = np.abs(slab[:, 1]) < half
+        between, facing = slab[inside], facing[inside]
         if len(between) == 0:
             return GraspOutcome(False, "nothing_between_pads", opening_cmd,
                                 "no part of the object lies between the finger pads"), None
@@ -138,8 +143,8 @@ class GraspChecker:
                                 f"the object is {width * 1000:.1f} mm wide, the gripper stops at "
                                 f"{opening_cmd * 1000:.1f} mm"), None
         tol = spec.contact_tolerance
-        area_lo = float(np.count_nonzero(between[:, 1] <= y_min + tol)) * self.area_per_point
-        area_hi = float(np.count_nonzero(between[:, 1] >= y_max - tol)) * self.area_per_point
+        area_lo = float(np.count_nonzero(facing & (between[:, 1] <= y_min + tol))) * self.area_per_point
+        area_hi = float(np.count_nonzero(facing & (between[:, 1] >= y_max - tol))) * self.area_per_point
         if min(area_lo, area_hi) < spec.min_contact_area:
             return GraspOutcome(False, "insufficient_contact", opening_cmd,
                                 f"contact patches of {area_lo * 1e6:.0f} and {area_hi * 1e6:.0f} mm^2, need "

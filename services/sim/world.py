@@ -75,8 +75,9 @@ class World:
         self._initial_pose = check_transform(default_object_pose() if object_pose is None else object_pose,
                                              "object_pose")
         self._lock = threading.RLock()
-        self._checker = GraspChecker(self.obj.vertices, self.obj.triangles,
-                                     self.obj.gt_points(_CONTACT_SAMPLES, seed=1), self.obj.surface_area, gripper)
+        pts, tri, _ = self.obj.sample_surface(_CONTACT_SAMPLES, seed=1)
+        self._checker = GraspChecker(self.obj.vertices, self.obj.triangles, pts, self.obj.triangle_normals()[tri],
+                                     self.obj.surface_area, gripper)
         self._scene: RenderScene | None = None
         self.reset(seed)
 
