@@ -42,8 +42,8 @@ class Intrinsics(Message):
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Intrinsics:
-        return cls(int(d["width"]), int(d["height"]), float(d["fx"]), float(d["fy"]),
-                   float(d["cx"]), float(d["cy"]))
+        return cls(width=int(d["width"]), height=int(d["height"]), fx=float(d["fx"]), fy=float(d["fy"]),
+                   cx=float(d["cx"]), cy=float(d["cy"]))
 
 
 @dataclass(kw_only=True)
@@ -57,7 +57,8 @@ class RGBDFrame(Message):
     color: np.ndarray = array_field("u1", (None, None, 3))
     depth: np.ndarray = array_field("<u2", (None, None))
     depth_scale: float = 0.001
-    intrinsics: Intrinsics = field(default_factory=lambda: Intrinsics(640, 480, 615.0, 615.0, 320.0, 240.0))
+    intrinsics: Intrinsics = field(
+        default_factory=lambda: Intrinsics(width=640, height=480, fx=615.0, fy=615.0, cx=320.0, cy=240.0))
     T_base_camera: np.ndarray = array_field("<f8", (4, 4))
     stamp: float = 0.0
     seq: int = 0

@@ -15,7 +15,7 @@ class ScanGeometry:
     reach all three (checked by IK + collision dry runs).
     """
 
-    azimuth_offsets_deg: tuple[float, ...] = (0.0, 28.0, -28.0)
+    azimuth_offsets_deg: tuple[float, ...] = (0.0, 22.0, -22.0)
     distances: tuple[float, ...] = (0.38, 0.42, 0.34)
     elevations_deg: tuple[float, ...] = (45.0, 55.0, 38.0)
     look_distance: float = 0.45  # the locate pose: higher and farther, to see the table around the object
@@ -51,6 +51,7 @@ class AcquisitionConfig:
     max_rescans: int = 2  # re-scans per view before the session ends with a reason
     force_first_slip: bool = False  # sim: the first grasp slips (recovery test)
     evaluate: bool = True  # compare with ground truth when the cell knows it (sim)
+    workspace_center: tuple[float, float] = (0.50, 0.0)  # where the locate pose looks (and the twin puts the object)
     scan: ScanGeometry = field(default_factory=ScanGeometry)
     turn: TurnMotion = field(default_factory=TurnMotion)
 

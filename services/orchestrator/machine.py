@@ -38,7 +38,6 @@ from services.orchestrator.store import SessionStore
 
 log = logging.getLogger("objscan.orchestrator")
 
-DEFAULT_WORKSPACE_CENTER = np.array([0.36, 0.0, 0.0])
 SCANS_PER_VIEW = 3
 
 
@@ -179,8 +178,9 @@ class Acquisition:
         """First start: reset the twin to this session's object/profile/seed (sim cells only)."""
         if self.j.get("simulated") is None:
             try:
+                x, y = self.config.workspace_center
                 await self.cell.sim("reset", object=self.config.object, profile=self.config.profile,
-                                    seed=self.config.seed)
+                                    seed=self.config.seed, x=float(x), y=float(y))
                 self.j["simulated"] = True
                 if self.config.force_first_slip:
                     await self.cell.sim("force_slip")
@@ -203,7 +203,7 @@ class Acquisition:
     # -------------------------------------------------------------------------------- states
     async def locate(self) -> State:
         """Look at the workspace, find the goal object (cluster nearest the image centre), estimate it."""
-        T = look_pose(DEFAULT_WORKSPACE_CENTER, self.config.scan)
+        T = look_pose(self._workspace_center(), self.config.scan)
         await self.cell.move("pose", target=T, frame="camera", speed=0.6)
         frame = await self.cell.capture(self.config.width, self.config.height)
         self.j["counters"]["captures"] += 1
@@ -224,7 +224,11 @@ class Acquisition:
         for k in range(view, -2, -1):
             if str(k) in self.j["centers"]:
                 return np.asarray(self.j["centers"][str(k)]), float(self.j["heights"][str(k)])
-        return DEFAULT_WORKSPACE_CENTER.copy(), 0.1
+        return self._workspace_center(), 0.1
+
+    def _workspace_center(self) -> np.ndarray:
+        x, y = self.config.workspace_center
+        return np.array([float(x), float(y), 0.0])
 
     async def _reachable_scan_set(self, view: int) -> list[np.ndarray]:
         key = str(view)

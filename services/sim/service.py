@@ -23,7 +23,7 @@ from common.errors import InvalidRequest
 from common.messages import JointState, Ok, Request, RGBDFrame
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
 from services.sim.sensor_model import d435_intrinsics
-from services.sim.world import World
+from services.sim.world import World, default_object_pose
 
 
 class SimService(Service):
@@ -80,7 +80,11 @@ class SimService(Service):
                 obj = params.get("object", w.obj.name)
                 profile = params.get("profile", w.profile.name)
                 seed = int(params.get("seed", w.seed))
-                self.world = await self.run_cpu(World, obj, profile=profile, seed=seed)
+                pose = None
+                if "x" in params or "y" in params or "yaw_deg" in params:
+                    pose = default_object_pose(float(params.get("x", 0.5)), float(params.get("y", 0.0)),
+                                               float(params.get("yaw_deg", 0.0)))
+                self.world = await self.run_cpu(lambda: World(obj, profile=profile, seed=seed, object_pose=pose))
                 self.seq = 0
             return Ok(info=self.world.state())
         if op == "force_slip":
