@@ -21,16 +21,27 @@ from common.geometry import transform_points
 
 @dataclass(frozen=True)
 class GripperSpec:
-    """Finger pad geometry in the gripper frame (m). Defaults: RH-P12-RN with PAPRAS fin-ray pads."""
+    """Finger pad geometry in the gripper frame (m). Defaults: ROBOTIS RH-P12-RN(A) on PAPRAS.
 
-    max_opening: float = 0.106  # RH-P12-RN stroke
-    pad_length: float = 0.035  # along x (approach)
-    pad_height: float = 0.020  # along z
-    pad_thickness: float = 0.010  # along y
-    pad_center_x: float = 0.0  # pad centres sit at the TCP along x
+    Pad sizes match ``services/grasp/config.py`` (bounding boxes of the RH-P12-RN distal links). The TCP
+    (``gripper`` frame of the arm's URDF) is midway between the pads *fully closed*; the parallel linkage
+    pulls the pads back along the approach as they open: ``retraction`` is that pull-back against the
+    opening, measured on the URDF linkage with pinocchio (pad point 20 mm up the distal link).
+    """
+
+    max_opening: float = 0.106  # RH-P12-RN(A) stroke
+    pad_length: float = 0.040  # along x (approach)
+    pad_height: float = 0.026  # along z
+    pad_thickness: float = 0.022  # along y
+    retraction_openings: tuple[float, ...] = (0.0, 0.02, 0.04, 0.06, 0.073, 0.09, 0.106)
+    retraction: tuple[float, ...] = (0.0, 0.0004, 0.0025, 0.0065, 0.0103, 0.0173, 0.0273)
     contact_tolerance: float = 0.003  # surface within this of a pad counts as touching it
-    min_contact_area: float = 2.0e-5  # m^2 (20 mm^2) of touching surface needed under each pad
+    min_contact_area: float = 2.0e-5  # m^2 (20 mm^2) of pad-facing surface needed under each pad
     table_clearance: float = 0.0  # pads must stay above z = table_clearance in base
+
+    def pad_center_x(self, opening: float) -> float:
+        """x of the pad centres in the gripper frame when the fingers are ``opening`` apart."""
+        return -float(np.interp(opening, self.retraction_openings, self.retraction))
 
 
 @dataclass(frozen=True)
@@ -60,7 +71,8 @@ class GraspContact:
 def pad_boxes(spec: GripperSpec, opening: float) -> list[tuple[np.ndarray, np.ndarray]]:
     """(min corner, max corner) of both pads in the gripper frame at ``opening``."""
     half = opening / 2.0
-    x0, x1 = spec.pad_center_x - spec.pad_length / 2, spec.pad_center_x + spec.pad_length / 2
+    cx = spec.pad_center_x(opening)
+    x0, x1 = cx - spec.pad_length / 2, cx + spec.pad_length / 2
     z0, z1 = -spec.pad_height / 2, spec.pad_height / 2
     return [(np.array([x0, half, z0]), np.array([x1, half + spec.pad_thickness, z1])),
             (np.array([x0, -half - spec.pad_thickness, z0]), np.array([x1, -half, z1]))]
@@ -93,6 +105,14 @@ class GraspChecker:
         occ = self._scene.compute_occupancy(o3d.core.Tensor(pts_object.astype(np.float32)), nsamples=5)
         return occ.numpy() > 0.5
 
+    def _slab(self, p: np.ndarray, in_pad_band: np.ndarray, facing: np.ndarray,
+              opening: float) -> tuple[np.ndarray, np.ndarray]:
+        """Surface samples (gripper frame) in the region the pads sweep when ``opening`` apart, and
+        whether each faces the pads."""
+        cx = self.spec.pad_center_x(opening)
+        sel = in_pad_band & (np.abs(p[:, 0] - cx) <= self.spec.pad_length / 2)
+        return p[sel], facing[sel]
+
     def evaluate(self, T_object_gripper: np.ndarray, T_base_gripper: np.ndarray, opening: float,
                  opening_cmd: float) -> tuple[GraspOutcome, GraspContact | None]:
         """Test the grasp at ``T_object_gripper`` with the fingers open at ``opening`` closing towards
@@ -110,11 +130,10 @@ class GraspChecker:
 
         T_gripper_object = np.linalg.inv(T_object_gripper)
         p = transform_points(T_gripper_object, self.points)
-        x0, x1 = spec.pad_center_x - spec.pad_length / 2, spec.pad_center_x + spec.pad_length / 2
-        in_slab = (p[:, 0] >= x0) & (p[:, 0] <= x1) & (np.abs(p[:, 2]) <= spec.pad_height / 2)
-        slab = p[in_slab]
         # how squarely each surface sample faces the pads (|n . y|): only such surface can bear on a pad
-        facing = np.abs(self.normals[in_slab] @ T_gripper_object[:3, :3][1]) > np.cos(np.radians(50.0))
+        facing_all = np.abs(self.normals @ T_gripper_object[:3, :3][1]) > np.cos(np.radians(50.0))
+        in_pad_band = np.abs(p[:, 2]) <= spec.pad_height / 2
+        slab, _ = self._slab(p, in_pad_band, facing_all, opening)
         half = opening / 2.0
 
         # pads inside the object's volume or cutting its surface: the fingers would have hit it
@@ -131,13 +150,27 @@ class GraspChecker:
             return GraspOutcome(False, "pad_collides_with_object", opening_cmd,
                                 f"a finger pad opened to {opening * 1000:.0f} mm is inside the object"), None
 
-        inside = np.abs(slab[:, 1]) < half
-        between, facing = slab[inside], facing[inside]
-        if len(between) == 0:
+        # the pads move forward as they close: a surface point at |y| is swept by the pad when the fingers
+        # are 2|y| apart, so it is within reach if the pad's x range at that opening covers it
+        ay = np.abs(p[:, 1])
+        cx_at = -np.interp(np.minimum(2 * ay, opening), spec.retraction_openings, spec.retraction)
+        reach = in_pad_band & (np.abs(p[:, 0] - cx_at) <= spec.pad_length / 2) & (ay < half)
+        if not reach.any():
             return GraspOutcome(False, "nothing_between_pads", opening_cmd,
                                 "no part of the object lies between the finger pads"), None
-        y_min, y_max = float(between[:, 1].min()), float(between[:, 1].max())
-        width = y_max - y_min
+        width = float(np.ptp(p[reach, 1]))
+        # then settle where the closed pads end up (their x depends on the width they stop at)
+        for _ in range(3):
+            slab, facing = self._slab(p, in_pad_band, facing_all, width)
+            inside = np.abs(slab[:, 1]) < half
+            between, facing = slab[inside], facing[inside]
+            if len(between) == 0:
+                return GraspOutcome(False, "nothing_between_pads", opening_cmd,
+                                    "no part of the object lies between the finger pads"), None
+            y_min, y_max = float(between[:, 1].min()), float(between[:, 1].max())
+            if abs((y_max - y_min) - width) < 1e-4:
+                break
+            width = y_max - y_min
         if width <= opening_cmd:
             return GraspOutcome(False, "pads_stop_before_contact", opening_cmd,
                                 f"the object is {width * 1000:.1f} mm wide, the gripper stops at "

@@ -12,6 +12,7 @@ import pytest
 from common.geometry import make_transform, rotation_about_axis, rotation_angle_deg, transform_error
 from services.sim.catalogue import load_object
 from services.sim.errors import SimInputError
+from services.sim.gripper import GripperSpec
 from services.sim.sensor_model import d435_intrinsics
 from services.sim.world import SimStateError, World, default_object_pose, yaw_of
 from tests.sim.meshes import write_box_ply
@@ -45,13 +46,30 @@ def test_off_centre_grasp_pushes_the_object_onto_the_gripper_axis(box):
     assert w.true_object_pose()[1, 3] == pytest.approx(0.012, abs=0.001)
 
 
+def test_pads_retract_as_they_open():
+    spec = GripperSpec()
+    assert spec.pad_center_x(0.0) == 0.0  # the TCP is between the pads fully closed
+    assert spec.pad_center_x(0.073) == pytest.approx(-0.0103)
+    assert spec.pad_center_x(0.106) < spec.pad_center_x(0.06) < spec.pad_center_x(0.02) < 0
+
+
+def test_a_grasp_too_shallow_for_the_retracted_pads_fails(box):
+    """With the fingers 60 mm apart the pads sit 6.5 mm behind the TCP: a TCP just 5 mm inside the box
+    front leaves the pads almost entirely in front of it."""
+    w = World(box)
+    out = w.close_gripper(frontal(x=0.33 + 0.005 - 0.02), 0.0)  # pad tips end 1.5 mm - 6.5 mm short
+    assert (out.success, out.reason) == (False, "nothing_between_pads")
+
+
 @pytest.mark.parametrize("pose,opening,reason", [
     (frontal(y=0.2), None, "nothing_between_pads"),  # beside the object
     (frontal(x=0.50), None, "nothing_between_pads"),  # in front of it, fingers in the air
     (frontal(z=0.005), None, "pad_hits_table"),  # pads below the table top
     (frontal(), 0.04, "pad_collides_with_object"),  # opened narrower than the object
     (frontal(y=0.05), None, "pad_collides_with_object"),  # one pad inside the object
-    (frontal(x=0.36 - 0.03 - 0.0175 + 0.0003), None, "insufficient_contact"),  # pads overlap 0.3 mm
+    # pad tips reach 0.3 mm past the box's front face (x = 0.33) once closed on its 60 mm
+    (frontal(x=0.33 - GripperSpec().pad_center_x(0.06) - GripperSpec().pad_length / 2 + 0.0003), None,
+     "insufficient_contact"),
 ])
 def test_unsound_grasps_fail_and_say_why(box, pose, opening, reason):
     w = World(box)
