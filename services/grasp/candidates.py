@@ -123,8 +123,22 @@ def surface_variation(points: np.ndarray, query: np.ndarray, radius: float, k: i
     return curv
 
 
+def extreme_point(slice_local: np.ndarray, col: int, side: int, tolerance: float) -> int:
+    """Index of the slice's extreme point along column ``col`` (side -1: min, +1: max).
+
+    On a flat face every point is 'extreme' to within noise, and the plain argmax lands anywhere on it
+    (two seeds at different heights give only tilted pairs). So among the points within ``tolerance``
+    of the extreme, take the one nearest the box's centre line in the other coordinate.
+    """
+    coords = side * slice_local[:, col]
+    near = np.flatnonzero(coords >= coords.max() - tolerance)
+    other = 3 - col  # 1 <-> 2
+    return int(near[np.argmin(np.abs(slice_local[near, other]))])
+
+
 def candidate_regions(frame: ObjectFrame, fingertip: float, slice_thickness: float, voxel: float,
-                      curvature_radius: float) -> tuple[list[CandidateRegion], int]:
+                      curvature_radius: float, seed_tolerance: float = 0.002
+                      ) -> tuple[list[CandidateRegion], int]:
     """The four candidate regions (y-min, y-max, z-min, z-max); empty list when the slice is empty.
 
     Returns (regions, number of slice points).
@@ -140,9 +154,9 @@ def candidate_regions(frame: ObjectFrame, fingertip: float, slice_thickness: flo
     slab_local = local[slab]
     regions = []
     for axis_name, col in (("y", 1), ("z", 2)):
-        coords = local[slice_idx, col]
-        for side, pick in ((-1, int(np.argmin(coords))), (1, int(np.argmax(coords)))):
-            seed = int(slice_idx[pick])
+        for side in (-1, 1):
+            seed = extreme_point(local[slice_idx], col, side, seed_tolerance)
+            seed = int(slice_idx[seed])
             offset = np.abs(slab_local - local[seed])
             idx = slab[np.all(offset <= half, axis=1)]
             kept = voxel_thin(idx, local, voxel)

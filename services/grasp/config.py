@@ -97,7 +97,7 @@ class GraspPlannerConfig:
     r2_min: float = 1.0
     cos_beta_gain: float = 10.0
     cos_beta_offset: float = 0.2
-    max_grasp_line_tilt_deg: float = 30.0
+    max_grasp_line_tilt_deg: float = 15.0
     """A grasp line steeper than this against the table plane cannot be held by a horizontal
     (frontal) or vertical (top-down) approach: rejected as ``grasp_line_not_horizontal``."""
 
