@@ -112,6 +112,7 @@ class RealSenseCamera(Camera):
         try:
             profile = pipeline.start(cfg)
         except RuntimeError as exc:
+            self._playback = None
             if self.config.playback_file is not None:
                 raise ReplayDataError(f"cannot play back {self.config.playback_file}: {exc}",
                                       detail={"file": str(self.config.playback_file)}) from None
