@@ -34,7 +34,7 @@ CONFIGURATIONS: dict[str, tuple[bool, bool]] = {
 class AcceptCriteria:
     """When the staged choice may stop: the loop closes and every neighbour fits as posed."""
 
-    max_loop_rotation_deg: float = 3.0
+    max_loop_rotation_deg: float = 5.0  # 12 edges of ~0.5-1° error each add up to a few degrees
     max_loop_translation_mm: float = 5.0
     min_posed_fitness: float = 0.6
 

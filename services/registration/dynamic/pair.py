@@ -57,7 +57,8 @@ class PairConfig:
     # fast path
     fast_voxels: tuple[float, ...] = (0.006, 0.003, 0.002)
     fast_max_corr_factor: tuple[float, ...] = (2.5, 2.0, 1.5)
-    yaw_hypotheses_deg: tuple[float, ...] = (0.0, -12.0, 12.0)
+    fast_iterations: tuple[int, ...] = (30, 20, 15)
+    yaw_hypotheses_deg: tuple[float, ...] = (0.0, -10.0, 10.0, -20.0, 20.0)  # robot turns err by up to ~18°
     accept_fitness: float = 0.55  # verification of the prior path (fitness on the evaluation clouds)
     accept_rmse: float = 0.0018
     fast_point_to_plane: bool = False  # a last point-to-plane pass: ~+30 % time, no gain measured on sim
@@ -165,11 +166,25 @@ def crop_to_overlap(source: Cloud, target: Cloud, center: np.ndarray, T: np.ndar
     return np.flatnonzero(np.isfinite(ds)), np.flatnonzero(np.isfinite(dt))
 
 
+_DOWN_CACHE: dict[tuple[int, float], tuple[Cloud, o3d.geometry.PointCloud]] = {}
+
+
 def _down(cloud: Cloud, voxel: float) -> o3d.geometry.PointCloud:
+    """Voxel-downsampled open3d copy, memoised for the duration of one pair job (see ``register_pair``).
+
+    A job downsamples the same two clouds at the same voxels several times (hypotheses, levels,
+    global fallback); open3d's ICPs do not modify their inputs, so sharing is safe. The cache keeps a
+    reference to the cloud so its ``id`` cannot be reused while the entry lives.
+    """
+    key = (id(cloud), float(voxel))
+    hit = _DOWN_CACHE.get(key)
+    if hit is not None and hit[0] is cloud:
+        return hit[1]
     pcd = cloud.to_o3d()
     if voxel > 0:
         pcd = pcd.voxel_down_sample(voxel)
     pcd.normalize_normals()
+    _DOWN_CACHE[key] = (cloud, pcd)
     return pcd
 
 
@@ -277,13 +292,15 @@ def paper_local(source: Cloud, target: Cloud, T0: np.ndarray, cfg: PairConfig) -
     return T, fails
 
 
-def fast_local(source: Cloud, target: Cloud, T0: np.ndarray, cfg: PairConfig) -> tuple[np.ndarray, int]:
-    """Coarse-to-fine color ICP then point-to-plane from ``T0``; (T, color-ICP failures)."""
+def fast_local(source: Cloud, target: Cloud, T0: np.ndarray, cfg: PairConfig,
+               start_level: int = 0) -> tuple[np.ndarray, int]:
+    """Coarse-to-fine color ICP (optionally then point-to-plane) from ``T0``; (T, color-ICP failures)."""
     T = T0
     fails = 0
-    for voxel, k in zip(cfg.fast_voxels, cfg.fast_max_corr_factor, strict=True):
+    levels = list(zip(cfg.fast_voxels, cfg.fast_max_corr_factor, cfg.fast_iterations, strict=True))
+    for voxel, k, iters in levels[start_level:]:
         s, t = _down(source, voxel), _down(target, voxel)
-        T, ok = _colored_icp(s, t, k * voxel, T, cfg.icp_iterations)
+        T, ok = _colored_icp(s, t, k * voxel, T, iters)
         fails += 0 if ok else 1
     if cfg.fast_point_to_plane:
         T = _point_to_plane(s, t, cfg.fast_voxels[-1], T, cfg.icp_iterations)
@@ -332,16 +349,17 @@ def register_pair(job: PairJob) -> PairResult:
         raise DynamicRegistrationError("pair clouds too small to register", code="empty_view",
                                        detail={"pair": job.index, "source": len(job.source),
                                                "target": len(job.target)})
-    scorer = _evaluation_clouds(job, cfg)
-    if cfg.mode == "paper":
-        res = _register_paper(job, cfg, scorer)
-    elif cfg.mode == "fast":
-        res = _register_fast(job, cfg, scorer)
-    else:
+    if cfg.mode not in ("fast", "paper"):
         from services.registration.dynamic.views import DynamicRegistrationError
 
         raise DynamicRegistrationError(f"unknown pair mode {cfg.mode!r}", code="bad_value",
                                        detail={"modes": ["fast", "paper"]})
+    _DOWN_CACHE.clear()
+    try:
+        scorer = _evaluation_clouds(job, cfg)
+        res = _register_paper(job, cfg, scorer) if cfg.mode == "paper" else _register_fast(job, cfg, scorer)
+    finally:
+        _DOWN_CACHE.clear()
     res.seconds = time.perf_counter() - t0
     return res
 
@@ -364,7 +382,7 @@ def _register_fast(job: PairJob, cfg: PairConfig, scorer: _Scorer) -> PairResult
             f, _, cf = scorer(T)
             coarse.append((_score_key(f, cf), T))
         T0 = max(coarse, key=lambda x: x[0])[1]
-        T, fails = fast_local(cand.source, cand.target, T0, cfg)
+        T, fails = fast_local(cand.source, cand.target, T0, cfg, start_level=1)
         fails_total += fails
         sc = scorer(T)
         tried.append({"candidate": cand.name, "fitness": sc[0], "color_fitness": sc[2]})

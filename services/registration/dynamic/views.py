@@ -84,3 +84,22 @@ def validate_views(views: list[DynamicView], min_views: int = 3) -> None:
                                        code="too_few_views", detail={"views": len(views)})
     for v in views:
         v.validate()
+
+
+def view_from_static(result, commanded_turn_deg: float, index: int = 0,
+                     T_view0_view_true: np.ndarray | None = None) -> DynamicView:
+    """A ``DynamicView`` from the static stage's ``ViewResult`` (``services/registration/static``).
+
+    The static stage reports the object's footprint centre on the table; the dynamic stage wants the
+    centre of the object body (the point the unit-sphere crop projects from), so it is lifted by half
+    the object's height along the table normal.
+    """
+    cloud = result.object_cloud
+    n = np.asarray(result.table.normal, dtype=float)
+    center = np.asarray(result.object_center, dtype=float) + 0.5 * float(result.object_height) * n
+    xyz = np.asarray(cloud.xyz, dtype=np.float32)
+    rgb = np.asarray(cloud.rgb, dtype=np.uint8) if cloud.rgb is not None else np.full(xyz.shape, 128, np.uint8)
+    nrm = None if cloud.normals is None else np.asarray(cloud.normals, dtype=np.float32)
+    return DynamicView(xyz=xyz, rgb=rgb, normals=nrm, table=result.table, center=center,
+                       commanded_turn_deg=float(commanded_turn_deg), index=index,
+                       T_view0_view_true=T_view0_view_true)
