@@ -233,12 +233,90 @@ _EMPTY_VCOLS = np.zeros((1, 3), dtype=np.float32)
 _EMPTY_ALBEDO = np.zeros((1, 3), dtype=np.float32)
 
 
+def _object_pixel_rect(scene: RenderScene, T: np.ndarray, K: Intrinsics) -> tuple[int, int, int, int] | None:
+    """Pixel rectangle (u0, u1, v0, v1) that contains the object's projected bounding box, or None when
+    the box reaches behind the camera (then every ray must be cast)."""
+    lo, hi = scene.obj.vertices.min(axis=0), scene.obj.vertices.max(axis=0)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    p_base = corners @ scene.T_base_object[:3, :3].T + scene.T_base_object[:3, 3]
+    p_cam = (p_base - T[:3, 3]) @ T[:3, :3]
+    if np.any(p_cam[:, 2] <= 1e-3):
+        return None
+    u = K.fx * p_cam[:, 0] / p_cam[:, 2] + K.cx
+    v = K.fy * p_cam[:, 1] / p_cam[:, 2] + K.cy
+    return (max(int(np.floor(u.min())) - 2, 0), min(int(np.ceil(u.max())) + 2, K.width - 1),
+            max(int(np.floor(v.min())) - 2, 0), min(int(np.ceil(v.max())) + 2, K.height - 1))
+
+
+def _cast(scene: RenderScene, T: np.ndarray, dirs: np.ndarray, K: Intrinsics, full_cast: bool = False
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(t_hit, geometry ids, primitive ids, barycentrics, normals) per pixel.
+
+    Ray casting is most of a frame's cost, and most rays hit the table top: those that hit it inside its
+    rectangle and do not pass through the object's projected bounding box cannot hit anything else, so
+    they are intersected analytically with z = 0 and only the rest go through the BVH.
+    """
+    n = dirs.shape[0]
+    origin = T[:3, 3].astype(np.float32)
+    cast = np.ones(n, dtype=bool)
+    table_hit = None
+    if scene.table is not None and origin[2] > 1e-6 and not full_cast:
+        dz = dirs[:, 2]
+        down = dz < -1e-9
+        t = np.full(n, np.inf, dtype=np.float32)
+        t[down] = -origin[2] / dz[down]
+        with np.errstate(invalid="ignore"):  # inf * 0 for rays that never come down: not table hits anyway
+            px = origin[0] + t * dirs[:, 0]
+            py = origin[1] + t * dirs[:, 1]
+        spec = scene.table
+        table_hit = (down & (np.abs(px - spec.center_xy[0]) < spec.size_xy[0] / 2 - 1e-6)
+                     & (np.abs(py - spec.center_xy[1]) < spec.size_xy[1] / 2 - 1e-6))
+        cast = ~table_hit
+        if scene.obj is not None:
+            rect = _object_pixel_rect(scene, T, K)
+            if rect is None:
+                cast[:] = True
+            else:
+                u0, u1, v0, v1 = rect
+                cast.reshape(K.height, K.width)[v0:v1 + 1, u0:u1 + 1] = True
+    if cast.all():
+        rays = np.empty((n, 6), dtype=np.float32)
+        rays[:, :3] = origin
+        rays[:, 3:] = dirs
+        ans = scene.scene.cast_rays(o3d.core.Tensor(rays))
+        return (ans["t_hit"].numpy(), ans["geometry_ids"].numpy(), ans["primitive_ids"].numpy(),
+                ans["primitive_uvs"].numpy(), ans["primitive_normals"].numpy())
+    idx = np.flatnonzero(cast)
+    analytic = ~cast
+    t_hit = np.full(n, np.inf, dtype=np.float32)
+    gids = np.full(n, o3d.t.geometry.RaycastingScene.INVALID_ID, dtype=np.uint32)
+    prims = np.zeros(n, dtype=np.uint32)
+    bary = np.zeros((n, 2), dtype=np.float32)
+    normals = np.zeros((n, 3), dtype=np.float32)
+    t_hit[analytic] = t[analytic]
+    gids[analytic] = scene.table_gid
+    normals[analytic, 2] = 1.0
+    if idx.size:
+        rays = np.empty((idx.size, 6), dtype=np.float32)
+        rays[:, :3] = origin
+        rays[:, 3:] = dirs[idx]
+        ans = scene.scene.cast_rays(o3d.core.Tensor(rays))
+        t_hit[idx] = ans["t_hit"].numpy()
+        gids[idx] = ans["geometry_ids"].numpy()
+        prims[idx] = ans["primitive_ids"].numpy()
+        bary[idx] = ans["primitive_uvs"].numpy()
+        normals[idx] = ans["primitive_normals"].numpy()
+    return t_hit, gids, prims, bary, normals
+
+
 def render(scene: RenderScene, T_base_camera: np.ndarray, intrinsics: Intrinsics, *,
-           noise: D435Noise | None, rng: np.random.Generator | None = None) -> RenderResult:
+           noise: D435Noise | None, rng: np.random.Generator | None = None, full_cast: bool = False) -> RenderResult:
     """Render colour, depth and labels of ``scene`` from a camera at ``T_base_camera`` (optical frame).
 
     With ``noise`` the D435 model is applied (drawing from ``rng``, required then); without it the
     depth is the exact ray-cast depth quantised to 1 mm, and the colour the shaded albedo.
+    ``full_cast`` sends every ray through the BVH instead of intersecting plain table rays analytically
+    (same result, slower; for verification).
     """
     T = check_transform(T_base_camera, "T_base_camera")
     w, h = int(intrinsics.width), int(intrinsics.height)
@@ -249,20 +327,13 @@ def render(scene: RenderScene, T_base_camera: np.ndarray, intrinsics: Intrinsics
     d_cam = _camera_rays(w, h, float(intrinsics.fx), float(intrinsics.fy), float(intrinsics.cx), float(intrinsics.cy))
     R = T[:3, :3].astype(np.float32)
     dirs = d_cam @ R.T
-    rays = np.empty((h * w, 6), dtype=np.float32)
-    rays[:, :3] = T[:3, 3].astype(np.float32)
-    rays[:, 3:] = dirs
-    ans = scene.scene.cast_rays(o3d.core.Tensor(rays))
-    t_hit = ans["t_hit"].numpy()
-    gids = ans["geometry_ids"].numpy()
     n = h * w
+    t_hit, gids, prims, bary, normals = _cast(scene, T, dirs, intrinsics, full_cast)
     color = np.empty((n, 3), dtype=np.uint8)
     labels = np.empty(n, dtype=np.uint8)
     depth_true = np.empty(n, dtype=np.float32)
     obj = scene.obj
     mode, tri_uvs, tex, tris, vcols, albedo = 2, _EMPTY_UVS, _EMPTY_TEX, _EMPTY_TRIS, _EMPTY_VCOLS, _EMPTY_ALBEDO
-    prims = ans["primitive_ids"].numpy()
-    bary = ans["primitive_uvs"].numpy()
     if obj is not None:
         if obj.appearance == "texture" and len(obj.textures) == 1:
             mode, tri_uvs, tex = 0, obj.triangle_uvs, obj.textures[0]
@@ -280,7 +351,7 @@ def render(scene: RenderScene, T_base_camera: np.ndarray, intrinsics: Intrinsics
     texel = table.texel_m if table is not None else 1.0
     light = np.asarray(scene.lighting.towards_light, dtype=np.float64)
     light /= np.linalg.norm(light)
-    _compose(t_hit, gids, prims, bary, ans["primitive_normals"].numpy(), dirs, T[:3, 3].astype(np.float32),
+    _compose(t_hit, gids, prims, bary, normals, dirs, T[:3, 3].astype(np.float32),
              scene.object_gid, scene.table_gid, mode, tri_uvs, tex, tris, vcols,
              DEFAULT_COLOR.astype(np.float64), albedo, table_tex, x0, y0, texel, light,
              float(scene.lighting.ambient), float(scene.lighting.diffuse), BACKGROUND_RGB, color, labels, depth_true)

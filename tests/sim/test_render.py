@@ -215,3 +215,19 @@ def test_bad_inputs_are_typed_errors(tmp_path):
         render(scene, np.eye(4), K, noise=D435Noise(), rng=None)
     with pytest.raises(SimInputError):
         D435Noise(dropout_prob=1.5)
+
+
+@pytest.mark.parametrize("height,pitch", [(0.3, -0.6), (0.05, -0.1), (0.6, -1.2)])
+def test_analytic_table_rays_match_full_ray_casting(tmp_path, height, pitch):
+    """Rays that only meet the table top are intersected analytically: the frame must be identical to
+    casting every ray (object in view, table edge in view, camera close above the table)."""
+    obj = load_object(str(write_textured_box_obj(tmp_path, size=0.08)))
+    scene = RenderScene(obj, make_transform(rot_z(0.4), [0.45, 0.05, 0.0]), table=TableSpec())
+    T = make_transform(rot_z(0.1) @ R_LOOK_X @ rot_x(pitch), [0.0, 0.0, height])
+    fast = render(scene, T, K, noise=D435Noise(), rng=np.random.default_rng(3))
+    full = render(scene, T, K, noise=D435Noise(), rng=np.random.default_rng(3), full_cast=True)
+    assert (fast.labels == LABEL_OBJECT).sum() > 500
+    np.testing.assert_array_equal(fast.labels, full.labels)
+    np.testing.assert_allclose(fast.depth_true, full.depth_true, atol=2e-6)
+    assert np.mean(fast.depth != full.depth) < 1e-3  # rounding at exact mm boundaries only
+    assert np.mean(np.any(fast.color != full.color, axis=-1)) < 1e-3
