@@ -74,12 +74,17 @@ def orthonormal_frame_from_axis(axis: np.ndarray) -> np.ndarray:
     a = np.asarray(axis, float)
     a = a / np.linalg.norm(a)
     helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    b = np.cross(a, helper)
-    b /= np.linalg.norm(b)
-    return np.column_stack([a, b, np.cross(a, b)])
+    b = cross3(a, helper)
+    b /= np.sqrt(b @ b)
+    return np.column_stack([a, b, cross3(a, b)])
 
 
-def min_area_rectangle(xy: np.ndarray, max_hull_input: int = 4000, hull_spacing: float = 0.002
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product of two 3-vectors without np.cross's general-axis overhead (hot in the planner)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def min_area_rectangle(xy: np.ndarray, max_hull_input: int = 2000, hull_spacing: float = 0.002
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Smallest-area enclosing rectangle of 2-D points (rotating calipers over the convex hull edges).
 

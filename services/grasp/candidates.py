@@ -152,17 +152,22 @@ def candidate_regions(frame: ObjectFrame, fingertip: float, slice_thickness: flo
     # every region lies in the slab |x| <= half_x (+ the curvature radius): mask the cloud once
     slab = np.flatnonzero(np.abs(local[:, 0]) <= half[0] + curvature_radius)
     slab_local = local[slab]
-    regions = []
+    found, near_all = [], []
     for axis_name, col in (("y", 1), ("z", 2)):
         for side in (-1, 1):
-            seed = extreme_point(local[slice_idx], col, side, seed_tolerance)
-            seed = int(slice_idx[seed])
+            seed = int(slice_idx[extreme_point(local[slice_idx], col, side, seed_tolerance)])
             offset = np.abs(slab_local - local[seed])
-            idx = slab[np.all(offset <= half, axis=1)]
-            kept = voxel_thin(idx, local, voxel)
-            near = slab[np.all(offset <= half + curvature_radius, axis=1)]
-            # thin the neighbourhood so k neighbours span the whole radius whatever the density
-            near = voxel_thin(near, local, 0.25 * curvature_radius)
-            curv = surface_variation(local[near], local[kept], curvature_radius)
-            regions.append(CandidateRegion(axis_name, side, seed, kept, curv, np.abs(local[kept, 0])))
+            kept = voxel_thin(slab[np.all(offset <= half, axis=1)], local, voxel)
+            found.append((axis_name, side, seed, kept))
+            near_all.append(slab[np.all(offset <= half + curvature_radius, axis=1)])
+    # one curvature pass for all regions; the neighbourhood is thinned so k neighbours span the whole
+    # radius whatever the density
+    near = voxel_thin(np.unique(np.concatenate(near_all)), local, 0.25 * curvature_radius)
+    all_kept = np.concatenate([f[3] for f in found])
+    curv_all = surface_variation(local[near], local[all_kept], curvature_radius)
+    regions, start = [], 0
+    for axis_name, side, seed, kept in found:
+        curv = curv_all[start:start + len(kept)]
+        start += len(kept)
+        regions.append(CandidateRegion(axis_name, side, seed, kept, curv, np.abs(local[kept, 0])))
     return regions, len(slice_idx)

@@ -78,8 +78,9 @@ class GraspPlannerConfig:
     # --- candidates
     slice_thickness: float = 0.007
     """Thickness of the central slice (GeoGrasp kGraspPlaneApprox = 7 mm)."""
-    region_voxel: float = 0.002
-    """Candidate regions are thinned to one point per voxel of this size; bounds the pair count."""
+    region_voxel: float = 0.003
+    """Candidate regions are thinned to one point per voxel of this size; bounds the pair count
+    (GeoGrasp voxelises its regions far more coarsely, at gripTip/2 = 12.5-15 mm)."""
     curvature_radius: float = 0.01
     """Neighbourhood radius of the surface-variation curvature of candidate points."""
     min_region_points: int = 3
@@ -134,7 +135,7 @@ class GraspPlannerConfig:
     """Frontal grasps approach from this side (the arm's base), so the hand never reaches around."""
 
     # --- centre estimate
-    center_slices: int = 12
+    center_slices: int = 10
     center_min_points: int = 12
     seed: int = 0
 

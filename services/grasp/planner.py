@@ -24,7 +24,6 @@ from services.grasp.candidates import ObjectFrame, candidate_regions, object_fra
 from services.grasp.circle import estimate_object_center
 from services.grasp.collision import (
     first_overlap,
-    hits_object,
     pad_boxes,
     palm_box,
     remainder_box,
@@ -77,11 +76,11 @@ def validate_inputs(cloud_xyz: Any, normals: Any, table: Plane) -> PlanningInput
     if nrm.shape != xyz.shape:
         raise GraspInputError("normals must have the cloud's shape", code="bad_shape",
                               detail={"cloud": list(xyz.shape), "normals": list(nrm.shape)})
-    bad = ~np.isfinite(xyz).all(axis=1) | ~np.isfinite(nrm).all(axis=1)
-    if np.any(bad):
+    if not (np.isfinite(xyz).all() and np.isfinite(nrm).all()):
+        bad = ~np.isfinite(xyz).all(axis=1) | ~np.isfinite(nrm).all(axis=1)
         raise GraspInputError(f"{int(bad.sum())} points or normals are NaN/inf", code="non_finite",
                               detail={"n_bad": int(bad.sum()), "first": int(np.flatnonzero(bad)[0])})
-    lengths = np.linalg.norm(nrm, axis=1)
+    lengths = np.sqrt(np.einsum("ij,ij->i", nrm, nrm))
     if np.any(lengths < 1e-6):
         raise GraspInputError(f"{int((lengths < 1e-6).sum())} normals have zero length", code="zero_normals")
     nrm = nrm / lengths[:, None]
@@ -283,11 +282,16 @@ def _axis_full(found: list[PlannedGrasp], axis: str, cfg: GraspPlannerConfig) ->
 
 def _object_hits(boxes: dict[str, OrientedBox], xyz: np.ndarray, cfg: GraspPlannerConfig
                  ) -> tuple[int, str | None]:
-    """Pads only: the palm sits behind the fingertips, and the paper's 0.05 m push assumes the fingers
-    retract as they open, so a palm box would reject grasps that work."""
-    for name in ("pad_plus", "pad_minus"):
-        n = hits_object(boxes[name], xyz, cfg.object_collision_min_points)
-        if n:
+    """Object points inside either pad. Pads only: the palm sits behind the fingertips, and the paper's
+    0.05 m push assumes the fingers retract as they open, so a palm box would reject grasps that work.
+    Both pads share the gripper's rotation, so the cloud is rotated once."""
+    pads = [boxes["pad_plus"], boxes["pad_minus"]]
+    local = xyz @ pads[0].rotation
+    for name, pad in zip(("pad_plus", "pad_minus"), pads, strict=True):
+        c = pad.center @ pad.rotation
+        inside = np.all(np.abs(local - c) <= pad.half_extents, axis=1)
+        n = int(np.count_nonzero(inside))
+        if n >= cfg.object_collision_min_points:
             return n, name
     return 0, None
 

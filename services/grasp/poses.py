@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from common.geometry import make_transform, rotation_about_axis, rotation_about_line
+from common.geometry import make_transform, rotation_about_line
 
 
 def frontal_rotation(p1: np.ndarray, p2: np.ndarray, up: np.ndarray, approach_origin: np.ndarray
@@ -85,13 +85,18 @@ def grasp_poses(R: np.ndarray, midpoint: np.ndarray, depth: float, back_off: flo
     T_turn = rotation_about_line(up, center, np.radians(turn_deg))
     grasps, pres, turns = {}, {}, {}
     for angle in offset_angles(offsets_deg):
-        R_off = R @ rotation_about_axis(np.array([0.0, 1.0, 0.0]), np.radians(angle))
+        R_off = R @ _rot_y(np.radians(angle))
         x = R_off[:, 0]
         T = make_transform(R_off, midpoint + depth * x)
         grasps[offset_name("grasp", angle)] = T
         pres[offset_name("pregrasp", angle)] = make_transform(R_off, T[:3, 3] - back_off * x)
         turns[offset_name("turn", angle)] = T_turn @ T
     return {**grasps, **pres, **turns}
+
+
+def _rot_y(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

@@ -78,13 +78,13 @@ class Rejections:
         if example is not None:
             bucket = self.examples.setdefault(reason, [])
             if len(bucket) < self.max_examples:
-                bucket.append(_jsonable(example))
+                bucket.append(example)
 
     def __contains__(self, reason: str) -> bool:
         return reason in self.counts
 
     def as_dict(self) -> dict[str, Any]:
-        return {"counts": dict(self.counts), "examples": {k: list(v) for k, v in self.examples.items()}}
+        return {"counts": dict(self.counts), "examples": _jsonable(self.examples)}
 
 
 @dataclass

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from services.grasp.candidates import object_frame
-from services.grasp.circle import estimate_object_center, fit_circle_2d
+from services.grasp.circle import estimate_object_center, fit_circle_2d, fit_circles_batched
 from tests.grasp import shapes as S
 
 
@@ -48,3 +48,21 @@ def test_object_centre_of_a_partial_noisy_can_is_its_axis(seed):
     c = frame.to_base(c_local[None])[0]
     assert used >= 8
     assert np.linalg.norm(c[:2] - S.OBJECT_XY) < 0.0005
+
+
+def test_batched_fit_matches_single_fits():
+    rng = np.random.default_rng(11)
+    groups, truth = [], []
+    for _ in range(6):
+        c, r = rng.uniform(-0.2, 0.2, 2), rng.uniform(0.01, 0.08)
+        t = rng.uniform(0, rng.uniform(np.pi, 2 * np.pi), 150)
+        groups.append(c + r * np.column_stack([np.cos(t), np.sin(t)]) + rng.normal(0, 0.0005, (150, 2)))
+        truth.append(c)
+    groups.append(np.column_stack([np.arange(5.0), np.arange(5.0)]))  # collinear: not a circle
+    labels = np.repeat(np.arange(len(groups)), [len(g) for g in groups])
+    centres, radii, ok = fit_circles_batched(np.vstack(groups), labels, len(groups), refine_iterations=8)
+    assert ok.tolist() == [True] * 6 + [False]
+    for k in range(6):
+        single = fit_circle_2d(groups[k], refine_iterations=8)
+        assert np.allclose(centres[k], single.center, atol=1e-7) and np.isclose(radii[k], single.radius)
+        assert np.linalg.norm(centres[k] - truth[k]) < 0.0005
