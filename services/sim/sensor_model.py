@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from common.messages import Intrinsics
 from services.sim.errors import SimInputError
@@ -102,20 +103,47 @@ def depth_edges(depth_m: np.ndarray, threshold_m: float) -> tuple[np.ndarray, np
 
     Returns (edges, target): ``edges`` marks valid pixels with a 4-neighbour more than ``threshold_m``
     nearer or farther, or with a neighbour without data; ``target`` is the depth across the largest jump
-    (0 where the only "jump" is to a pixel without data: nothing to blend with).
+    (0 where the only "jump" is to a pixel without data: nothing to blend with). Pixels outside the
+    image count as copies of the border pixel.
     """
-    h, w = depth_m.shape
-    pad = np.pad(depth_m, 1, mode="edge")
-    neighbours = np.stack([pad[0:h, 1:w + 1], pad[2:h + 2, 1:w + 1], pad[1:h + 1, 0:w], pad[1:h + 1, 2:w + 2]])
-    valid = depth_m > 0
-    far = neighbours.max(axis=0)
-    near = np.where(neighbours > 0, neighbours, np.inf).min(axis=0)
-    far_jump = far - depth_m
-    near_jump = np.where(np.isfinite(near), depth_m - near, 0.0)
-    target = np.where(far_jump >= near_jump, far, near)
-    has_target = valid & (np.maximum(far_jump, near_jump) > threshold_m)
-    hole = (neighbours <= 0).any(axis=0)
-    return valid & (has_target | hole), np.where(has_target, target, 0.0).astype(np.float32)
+    depth = np.ascontiguousarray(depth_m, dtype=np.float32)
+    edges = np.zeros(depth.shape, dtype=np.bool_)
+    target = np.zeros(depth.shape, dtype=np.float32)
+    _depth_edges(depth, np.float32(threshold_m), edges, target)
+    return edges, target
+
+
+@njit(cache=True, nogil=True)
+def _depth_edges(depth, thr, edges, target):  # pragma: no cover - compiled
+    h, w = depth.shape
+    for r in range(h):
+        for c in range(w):
+            d = depth[r, c]
+            if d <= 0:
+                continue
+            far = d
+            near = d
+            hole = False
+            for k in range(4):
+                rr = r + (k == 1) - (k == 0)
+                cc = c + (k == 3) - (k == 2)
+                rr = min(max(rr, 0), h - 1)
+                cc = min(max(cc, 0), w - 1)
+                e = depth[rr, cc]
+                if e <= 0:
+                    hole = True
+                    continue
+                if e > far:
+                    far = e
+                if e < near:
+                    near = e
+            far_jump = far - d
+            near_jump = d - near
+            if far_jump > thr or near_jump > thr:
+                edges[r, c] = True
+                target[r, c] = far if far_jump >= near_jump else near
+            elif hole:
+                edges[r, c] = True
 
 
 def _edge_artifacts(depth: np.ndarray, noise: D435Noise, rng: np.random.Generator) -> None:
