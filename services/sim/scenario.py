@@ -105,7 +105,8 @@ def write_session(directory: str | Path, views: list[list[RGBDFrame]], *, extra:
     """Write ``views`` (as returned by ``simulated_views``) as a session folder; returns its path.
 
     session.json holds ``object``, ``profile``, ``seed``, ``source: "sim"`` and ``views`` with each view's
-    cumulative ``commanded_turn_deg`` and, in a ``ground_truth`` block, the true object pose and turn.
+    cumulative ``commanded_turn_deg`` and, in a ``ground_truth`` block, the true object pose and turn; the
+    top-level ``ground_truth.object_model`` says which mesh (path, scale, up axis) to evaluate against.
     """
     if not views or not views[0]:
         raise SimInputError("no frames to write", code="bad_value")
@@ -126,7 +127,7 @@ def write_session(directory: str | Path, views: list[list[RGBDFrame]], *, extra:
                              "achieved_turn_deg": meta.get("achieved_turn_deg_true")},
         })
     data = {"object": first.get("object"), "profile": first.get("profile"), "seed": first.get("seed"),
-            "source": "sim", "views": entries}
+            "source": "sim", "views": entries, "ground_truth": {"object_model": first.get("object_model")}}
     if extra:
         data.update(extra)
     write_session_json(session, data)

@@ -193,7 +193,7 @@ class World:
                          T_base_camera=believed, stamp=time.time() if stamp is None else float(stamp), seq=int(seq),
                          T_base_camera_true=np.asarray(T_base_camera_true, dtype=np.float64).copy(),
                          meta={"source": "sim", "object": self.obj.name, "profile": self.profile.name,
-                               "T_base_object_true": T_obj})
+                               "T_base_object_true": T_obj, "object_model": self.object_model()})
 
     # -- hands ------------------------------------------------------------------------------------------
     def force_next_grasp_slip(self) -> None:
@@ -304,6 +304,12 @@ class World:
                                   "shift_m": shift.tolist(), "bounced": bounced}
             return achieved
 
+    def object_model(self) -> dict:
+        """Where the ground-truth mesh comes from: enough for an evaluator to ``load_object`` it again."""
+        o = self.obj
+        return {"name": o.name, "source": None if o.source is None else str(o.source), "scale": o.scale,
+                "up_axis": o.up_axis}
+
     # -- reporting --------------------------------------------------------------------------------------
     def state(self) -> dict:
         """JSON-able snapshot; ground truth is under ``ground_truth``."""
@@ -312,6 +318,7 @@ class World:
                 return None if T is None else np.asarray(T).tolist()
             return {
                 "object": self.obj.name,
+                "object_model": self.object_model(),
                 "profile": self.profile.name,
                 "seed": self.seed,
                 "attached": self.attached,

@@ -110,6 +110,9 @@ def test_write_session(tmp_path, cube):
     data = json.loads((path / "session.json").read_text())
     assert data["profile"] == "robot-turned" and data["seed"] == 1 and data["note"] == "test"
     assert data["object"] == "qbox" and data["source"] == "sim"
+    model = data["ground_truth"]["object_model"]
+    again = load_object(model["source"], scale=model["scale"], up_axis=model["up_axis"])
+    np.testing.assert_allclose(again.vertices, load_object(cube).vertices)
     np.testing.assert_allclose(data["views"][1]["ground_truth"]["T_base_object"],
                                views[1][0].meta["T_base_object_true"])
     for k in range(2):
