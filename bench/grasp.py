@@ -59,7 +59,8 @@ def _crop_object(points: np.ndarray) -> np.ndarray:
 def _with_normals(points: np.ndarray, cameras: list[np.ndarray], rng: np.random.Generator
                   ) -> tuple[np.ndarray, np.ndarray]:
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    pcd = pcd.voxel_down_sample(0.001)  # merged scans overlap: one point per mm³ before sampling
+    if len(points) > 3 * N_POINTS:  # merged scans overlap: thin only when there is plenty to spare
+        pcd = pcd.voxel_down_sample(0.0005)
     pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.01, max_nn=30))
     pcd.orient_normals_towards_camera_location(np.mean(cameras, axis=0))
     p, n = np.asarray(pcd.points), np.asarray(pcd.normals)
@@ -184,7 +185,8 @@ def run(quick: bool = False) -> dict[str, Any]:
         "n_objects": len(per_object),
         "pca_axis_tilt_deg_max": max(o["pca_axis_tilt_deg"] for o in per_object.values()),
         "box_axis_tilt_deg": 0.0,
-        "n_points": N_POINTS,
+        "n_points_target": N_POINTS,
+        "n_points_median": float(np.median([o["n_points"] for o in per_object.values()])),
         "repeats": repeats,
         "cloud_source": source,
         "per_object": per_object,

@@ -141,14 +141,14 @@ def estimate_object_center(local_points: np.ndarray, extents: np.ndarray, slice_
     """
     half_x = 0.5 * float(extents[0]) * (1.0 - 2.0 * end_margin)
     max_radius = float(np.hypot(extents[1], extents[2]))
-    order = np.argsort(local_points[:, 0])  # sorted once; each slice is then two binary searches
-    xs = local_points[order, 0]
+    xs = local_points[:, 0]
     positions = rng.uniform(-half_x + 0.5 * slice_thickness, half_x - 0.5 * slice_thickness,
                             size=n_slices) if half_x > slice_thickness else np.zeros(1)
-    lo = np.searchsorted(xs, positions - 0.5 * slice_thickness)
-    hi = np.searchsorted(xs, positions + 0.5 * slice_thickness)
-    groups = [order[a:b:max(1, (b - a) // max_points_per_slice)] for a, b in zip(lo, hi, strict=True)
-              if b - a >= min_points]
+    groups = []
+    for x0 in positions:  # a mask per slice is cheaper than sorting the cloud once
+        idx = np.flatnonzero(np.abs(xs - x0) <= 0.5 * slice_thickness)
+        if len(idx) >= min_points:
+            groups.append(idx[:: max(1, len(idx) // max_points_per_slice)])
     if not groups:
         return np.zeros(3), 0
     labels = np.repeat(np.arange(len(groups)), [len(g) for g in groups])

@@ -286,10 +286,13 @@ def _object_hits(boxes: dict[str, OrientedBox], xyz: np.ndarray, cfg: GraspPlann
     0.05 m push assumes the fingers retract as they open, so a palm box would reject grasps that work.
     Both pads share the gripper's rotation, so the cloud is rotated once."""
     pads = [boxes["pad_plus"], boxes["pad_minus"]]
-    local = xyz @ pads[0].rotation
+    R = pads[0].rotation
+    # cheap prefilter on one coordinate (the pads' common y line), then the full test on the few left
+    y = xyz @ R[:, 1]
     for name, pad in zip(("pad_plus", "pad_minus"), pads, strict=True):
-        c = pad.center @ pad.rotation
-        inside = np.all(np.abs(local - c) <= pad.half_extents, axis=1)
+        c = pad.center @ R
+        near = np.flatnonzero(np.abs(y - c[1]) <= pad.half_extents[1])
+        inside = np.all(np.abs(xyz[near] @ R - c) <= pad.half_extents, axis=1)
         n = int(np.count_nonzero(inside))
         if n >= cfg.object_collision_min_points:
             return n, name
