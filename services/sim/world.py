@@ -67,8 +67,9 @@ class World:
 
     def __init__(self, obj: SimObject | str, *, profile: ErrorProfile | str = "ideal", seed: int = 0,
                  object_pose: np.ndarray | None = None, table: TableSpec | None = None,
-                 gripper: GripperSpec | None = None):
-        self.obj = load_object(obj) if isinstance(obj, str) else obj
+                 gripper: GripperSpec | None = None, scale: float | None = None, up_axis: str | None = None):
+        """``obj`` is a ``SimObject`` or a HOPE name / mesh path (loaded with ``scale`` and ``up_axis``)."""
+        self.obj = load_object(obj, scale=scale, up_axis=up_axis) if isinstance(obj, str) else obj
         self.profile = get_profile(profile)
         self.table = table or TableSpec()
         self.gripper = gripper = gripper or GripperSpec()

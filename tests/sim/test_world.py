@@ -231,3 +231,10 @@ def test_hope_milk_frontal_grasp(tmp_path):
     w = World("milk")
     out = w.close_gripper(frontal(z=0.09), 0.0)
     assert out.success and out.width == pytest.approx(0.073, abs=0.003)
+
+
+def test_world_loads_a_user_mesh_with_scale_and_up_axis(tmp_path):
+    path = write_box_ply(tmp_path, (6.0, 15.0, 6.0), name="cm_y_up")  # centimetres, y up
+    w = World(str(path), scale=0.01, up_axis="y")
+    np.testing.assert_allclose(w.obj.extent, [0.06, 0.06, 0.15], atol=1e-9)
+    assert w.close_gripper(frontal(), 0.0).success
