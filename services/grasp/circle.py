@@ -67,7 +67,7 @@ def fit_circle_2d(points: np.ndarray, refine_iterations: int = 5) -> CircleFit |
                      n=len(p))
 
 
-def fit_circles_batched(points: np.ndarray, labels: np.ndarray, n_groups: int, refine_iterations: int = 4
+def fit_circles_batched(points: np.ndarray, labels: np.ndarray, n_groups: int, refine_iterations: int = 3
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The fit of :func:`fit_circle_2d` for many point groups at once (the centre estimate fits a dozen
     slices per plan; one vectorised pass over all of them costs about what one fit does).

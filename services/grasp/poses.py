@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from common.geometry import make_transform, rotation_about_line
+from services.grasp.boxes import cross3
 
 
 def frontal_rotation(p1: np.ndarray, p2: np.ndarray, up: np.ndarray, approach_origin: np.ndarray
@@ -30,7 +31,7 @@ def frontal_rotation(p1: np.ndarray, p2: np.ndarray, up: np.ndarray, approach_or
     from the arm's side. Returns (R, swapped).
     """
     y = _unit(p1 - p2)
-    x = np.cross(y, up)
+    x = cross3(y, up)
     if np.linalg.norm(x) < 1e-9:
         raise ValueError("grasp line parallel to the table normal has no horizontal approach")
     x = _unit(x)
@@ -40,7 +41,7 @@ def frontal_rotation(p1: np.ndarray, p2: np.ndarray, up: np.ndarray, approach_or
     swapped = bool(np.linalg.norm(away) > 1e-9 and x @ away < 0)
     if swapped:
         x, y = -x, -y
-    return np.column_stack([x, y, np.cross(x, y)]), swapped
+    return np.column_stack([x, y, cross3(x, y)]), swapped
 
 
 def top_down_rotation(p1: np.ndarray, p2: np.ndarray, up: np.ndarray, approach_origin: np.ndarray
@@ -53,7 +54,7 @@ def top_down_rotation(p1: np.ndarray, p2: np.ndarray, up: np.ndarray, approach_o
     if np.linalg.norm(down) < 1e-9:
         raise ValueError("grasp line parallel to the table normal has no downward approach")
     x = _unit(down)
-    z = np.cross(x, y)
+    z = cross3(x, y)
     mid = 0.5 * (p1 + p2)
     away = mid - np.asarray(approach_origin, float)
     away = away - (away @ up) * up
