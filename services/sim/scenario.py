@@ -21,6 +21,7 @@ from common.geometry import look_at
 from common.messages import Intrinsics, RGBDFrame
 from common.session_folder import write_scan
 from common.session_folder import write_session as write_session_json
+from services.sim.catalogue import load_object
 from services.sim.errors import SimInputError
 from services.sim.profiles import ErrorProfile, get_profile, hand_turn
 from services.sim.sensor_model import d435_intrinsics
@@ -132,3 +133,19 @@ def write_session(directory: str | Path, views: list[list[RGBDFrame]], *, extra:
         data.update(extra)
     write_session_json(session, data)
     return session
+
+
+def true_object_points(frame: RGBDFrame, n: int = 50000, seed: int = 0, *, colors: bool = False
+                       ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+    """Ground-truth surface samples of the object in ``base`` as it stood when ``frame`` was captured
+    (from the frame's ``object_model`` and ``T_base_object_true``; works on frames read back from a
+    session folder too). With ``colors``: (points, uint8 colours). For evaluation only."""
+    meta = frame.meta or {}
+    model, T = meta.get("object_model"), meta.get("T_base_object_true")
+    if not model or T is None:
+        raise SimInputError("frame carries no ground truth (not from the sim?)", code="bad_value")
+    obj = load_object(model["source"] or model["name"], scale=model["scale"], up_axis=model["up_axis"])
+    T = np.asarray(T, dtype=np.float64).reshape(4, 4)
+    pts, rgb = obj.gt_colored_points(n, seed)
+    pts = pts @ T[:3, :3].T + T[:3, 3]
+    return (pts, rgb) if colors else pts

@@ -14,7 +14,7 @@ from common.geometry import yaw_deg_about
 from common.session_folder import read_session
 from services.sim.catalogue import load_object
 from services.sim.render import LABEL_OBJECT
-from services.sim.scenario import ScanPoses, camera_look_at, simulated_views, write_session
+from services.sim.scenario import ScanPoses, camera_look_at, simulated_views, true_object_points, write_session
 from services.sim.sensor_model import d435_intrinsics
 from tests.sim.meshes import write_textured_box_obj
 
@@ -53,13 +53,10 @@ def test_views_scans_turns_and_determinism(cube):
 def test_depth_lands_on_the_true_surface(cube):
     """Back-project the object pixels of every frame with the true camera pose: they lie on the true mesh
     (ideal profile: only 1 mm quantisation)."""
-    obj = load_object(cube)
-    gt = obj.gt_points(60000, seed=0)
     views = simulated_views(cube, views=2, scans_per_view=3, profile="ideal", seed=0, intrinsics=SMALL)
     for frames in views:
         for f in frames:
-            T_obj = np.asarray(f.meta["T_base_object_true"])
-            tree = cKDTree(gt @ T_obj[:3, :3].T + T_obj[:3, 3])
+            tree = cKDTree(true_object_points(f, 60000))
             v, u = np.nonzero(f.depth > 0)
             z = f.depth[v, u] * f.depth_scale
             K = f.intrinsics
