@@ -46,15 +46,11 @@ class FramePoints:
 
 
 @lru_cache(maxsize=8)
-def _ray_grid(
-    width: int, height: int, fx: float, fy: float, cx: float, cy: float
-) -> tuple[np.ndarray, np.ndarray]:
+def _ray_grid(width: int, height: int, fx: float, fy: float, cx: float, cy: float) -> tuple[np.ndarray, np.ndarray]:
     """Per-pixel (x/z, y/z) of the pinhole rays; cached because every frame of a camera shares it."""
     u = (np.arange(width, dtype=np.float64) - cx) / fx
     v = (np.arange(height, dtype=np.float64) - cy) / fy
-    return np.broadcast_to(u[None, :], (height, width)).ravel(), np.broadcast_to(
-        v[:, None], (height, width)
-    ).ravel()
+    return np.broadcast_to(u[None, :], (height, width)).ravel(), np.broadcast_to(v[:, None], (height, width)).ravel()
 
 
 def check_frame(frame: RGBDFrame) -> None:
@@ -78,15 +74,32 @@ def check_frame(frame: RGBDFrame) -> None:
     if not (intr.fx > 0 and intr.fy > 0 and np.isfinite([intr.fx, intr.fy, intr.cx, intr.cy]).all()):
         raise CloudError("intrinsics must be finite with positive focal lengths", code="bad_value")
     if not (np.isfinite(frame.depth_scale) and frame.depth_scale > 0):
-        raise CloudError(
-            "depth_scale must be positive", code="bad_value", detail={"depth_scale": frame.depth_scale}
-        )
+        raise CloudError("depth_scale must be positive", code="bad_value", detail={"depth_scale": frame.depth_scale})
     T = np.asarray(frame.T_base_camera, dtype=np.float64)
     if T.shape != (4, 4) or not np.isfinite(T).all():
         raise CloudError("T_base_camera must be a finite 4x4 matrix", code="bad_value")
     R = T[:3, :3]
     if not np.allclose(R @ R.T, np.eye(3), atol=1e-4) or not np.allclose(T[3], [0, 0, 0, 1]):
         raise CloudError("T_base_camera is not a rigid transform", code="bad_value")
+
+
+def depth_edge_mask(depth_m: np.ndarray, threshold: float) -> np.ndarray:
+    """True where a pixel's depth jumps by more than ``threshold`` (m) to one of its 8 valid neighbours.
+
+    Those are silhouette pixels and the "flying pixels" a stereo camera blends between a foreground edge
+    and the background behind it: points that float in space near the object but belong to neither.
+    """
+    z = np.asarray(depth_m, dtype=np.float32)
+    h, w = z.shape
+    pad = np.pad(z, 1, mode="constant", constant_values=0.0)
+    edge = np.zeros((h, w), dtype=bool)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            if dy == 0 and dx == 0:
+                continue
+            nb = pad[1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w]
+            edge |= (nb > 0) & (np.abs(nb - z) > threshold)
+    return edge & (z > 0)
 
 
 def frame_points(
@@ -96,12 +109,14 @@ def frame_points(
     depth_max: float = 1.5,
     T: np.ndarray | None = None,
     stride: int = 1,
+    edge_threshold: float | None = None,
 ) -> FramePoints:
     """Back-project the valid depth pixels of ``frame``.
 
     Points come out in ``camera`` when ``T`` is None, else mapped by ``T`` (pass ``frame.T_base_camera``
     for ``base``). Depth outside ``[depth_min, depth_max]`` (including the 0 = no-return value) is dropped;
-    ``stride`` > 1 takes every stride-th row and column, a cheap preview.
+    ``stride`` > 1 takes every stride-th row and column, a cheap preview. With ``edge_threshold`` (m),
+    pixels at a depth discontinuity larger than that are dropped (see ``depth_edge_mask``).
     """
     check_frame(frame)
     depth = np.asarray(frame.depth)
@@ -110,6 +125,8 @@ def frame_points(
     gx, gy = _ray_grid(w, h, float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy))
     z = depth.ravel().astype(np.float64) * frame.depth_scale
     keep = (z >= depth_min) & (z <= depth_max)
+    if edge_threshold is not None:
+        keep &= ~depth_edge_mask(z.reshape(h, w), edge_threshold).ravel()
     if stride > 1:
         grid = np.zeros((h, w), dtype=bool)
         grid[::stride, ::stride] = True
@@ -127,12 +144,8 @@ def frame_to_cloud(
     frame: RGBDFrame, *, depth_min: float = 0.1, depth_max: float = 1.5, in_base: bool = True
 ) -> PointCloud:
     """The frame as a wire ``PointCloud`` (no normals), in ``base`` (believed pose) or in ``camera``."""
-    pts = frame_points(
-        frame, depth_min=depth_min, depth_max=depth_max, T=frame.T_base_camera if in_base else None
-    )
-    return PointCloud(
-        xyz=pts.xyz.astype(np.float32), rgb=pts.rgb, normals=None, frame="base" if in_base else "camera"
-    )
+    pts = frame_points(frame, depth_min=depth_min, depth_max=depth_max, T=frame.T_base_camera if in_base else None)
+    return PointCloud(xyz=pts.xyz.astype(np.float32), rgb=pts.rgb, normals=None, frame="base" if in_base else "camera")
 
 
 def _check_xyz(xyz: np.ndarray, what: str = "xyz") -> np.ndarray:
@@ -218,11 +231,7 @@ def downsample(
 def transform_cloud(cloud: PointCloud, T: np.ndarray, frame: str | None = None) -> PointCloud:
     """``cloud`` mapped by ``T`` (points and normals), keeping colors."""
     xyz = transform_points(np.asarray(T, dtype=np.float64), cloud.xyz.astype(np.float64)).astype(np.float32)
-    nrm = (
-        None
-        if cloud.normals is None
-        else rotate_vectors(T, cloud.normals.astype(np.float64)).astype(np.float32)
-    )
+    nrm = None if cloud.normals is None else rotate_vectors(T, cloud.normals.astype(np.float64)).astype(np.float32)
     return PointCloud(xyz=xyz, rgb=cloud.rgb, normals=nrm, frame=frame or cloud.frame)
 
 

@@ -21,6 +21,7 @@ class StaticConfig:
     # --- back-projection -------------------------------------------------------------------------------
     depth_min: float = 0.1  # m; the D435 returns nothing useful closer
     depth_max: float = 1.2  # m; the workspace is within reach of the arm, farther is background
+    edge_threshold: float | None = 0.01  # m; drop pixels at depth jumps (silhouettes, flying pixels)
 
     # --- region of interest (default profile) -----------------------------------------------------------
     # Cylinder about the table normal (or a sphere when no up direction is known) around the seed point:
@@ -52,6 +53,8 @@ class StaticConfig:
 
     # --- global registration (paper, and the default's fallback) ----------------------------------------
     global_voxel: float = 0.01  # m; FPFH features at this voxel (radius 5 x voxel)
+    global_object_voxel: float = 0.005  # m; the default's fallback matches the table-free object, finer
+    global_attempts: int = 3  # RANSAC runs (seeds) of the default's fallback; the best-scoring wins
     ransac_iterations: int = 100000
     ransac_confidence: float = 0.999
     fpfh_radius_factor: float = 5.0

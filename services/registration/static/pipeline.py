@@ -68,7 +68,7 @@ def _load_scans(frames: list[RGBDFrame], cfg: StaticConfig) -> list[Scan]:
         if not isinstance(f, RGBDFrame):
             raise BadFramesError(f"frame {i} is a {type(f).__name__}, not an RGBDFrame")
         try:
-            pts = frame_points(f, depth_min=cfg.depth_min, depth_max=cfg.depth_max)
+            pts = frame_points(f, depth_min=cfg.depth_min, depth_max=cfg.depth_max, edge_threshold=cfg.edge_threshold)
         except CloudError as exc:
             raise BadFramesError(f"frame {i}: {exc.message}", detail={"frame": i, **exc.detail}) from None
         if len(pts) < MIN_SCAN_POINTS:
@@ -154,19 +154,23 @@ def _gicp_pyramid(src: dict, tgt: dict, cfg: StaticConfig, init: np.ndarray) -> 
     return T
 
 
-def _pair_default(src: dict, tgt: dict, prior: np.ndarray, cfg: StaticConfig, seed: int) -> PairOutcome:
-    """Local first (RGB-D odometry, then GICP, both from the arm's prior), global only when both fail."""
-    ok, T = rgbd_odometry(
+def _odometry(src: dict, tgt: dict, init: np.ndarray, cfg: StaticConfig) -> tuple[bool, np.ndarray]:
+    return rgbd_odometry(
         src["image"](),
         tgt["image"](),
         src["intrinsic"],
-        prior,
+        init,
         iterations=cfg.odometry_iterations,
         max_depth_diff=cfg.odometry_max_depth_diff,
         depth_min=cfg.depth_min,
         depth_max=cfg.depth_max,
         hybrid=cfg.odometry_hybrid,
     )
+
+
+def _pair_default(src: dict, tgt: dict, prior: np.ndarray, cfg: StaticConfig, seed: int) -> PairOutcome:
+    """Local first (RGB-D odometry, then GICP, both from the arm's prior), global only when both fail."""
+    ok, T = _odometry(src, tgt, prior, cfg)
     res, passed = _check(src["check"], tgt["check"], T, prior, cfg)
     if ok and passed:
         return PairOutcome(T, "local", "rgbd_odometry", res, True)
@@ -178,26 +182,54 @@ def _pair_default(src: dict, tgt: dict, prior: np.ndarray, cfg: StaticConfig, se
     if passed:
         return PairOutcome(T, "local", "icp", res, True)
     candidates.append(PairOutcome(T, "local", "icp", res, False))
-    for d in (src, tgt):
-        if "global" not in d:
-            d["global"] = downsample(d["pcd"], cfg.global_voxel, toward=np.zeros(3))
-    glob = pw.global_ransac(
-        src["global"],
-        tgt["global"],
-        cfg.global_voxel,
-        seed=seed,
-        iterations=cfg.ransac_iterations,
-        confidence=cfg.ransac_confidence,
-        radius_factor=cfg.fpfh_radius_factor,
-        corr_factor=cfg.ransac_corr_factor,
+    return _global_default(src, tgt, cfg, seed, candidates)
+
+
+def _object_part(d: dict, cfg: StaticConfig, seed: int) -> None:
+    """Table-free copies of a scan for the global fallback: the table makes false high-overlap matches."""
+    if "obj_global" not in d:
+        obj = _strip_table(d["pcd"], cfg, seed)
+        d["obj_global"] = downsample(obj, cfg.global_object_voxel, toward=np.zeros(3))
+        d["obj_check"] = downsample(obj, cfg.check_voxel, normals=False)
+
+
+def _global_default(src: dict, tgt: dict, cfg: StaticConfig, seed: int, candidates: list[PairOutcome]) -> PairOutcome:
+    """The arm's prior failed: FPFH RANSAC on the table-free clouds (a few seeds), each refined by GICP and
+    polished by odometry; every candidate, the local ones too, is scored on the table-free clouds."""
+    _object_part(src, cfg, seed)
+    _object_part(tgt, cfg, seed + 1)
+    corr = cfg.check_voxel * cfg.check_corr_factor
+    scored = []
+    for c in candidates:
+        scored.append((pw.evaluate(src["obj_check"], tgt["obj_check"], c.T, corr), c))
+    for k in range(cfg.global_attempts):
+        glob = pw.global_ransac(
+            src["obj_global"],
+            tgt["obj_global"],
+            cfg.global_object_voxel,
+            seed=seed + 1000 * k,
+            iterations=cfg.ransac_iterations,
+            confidence=cfg.ransac_confidence,
+            radius_factor=cfg.fpfh_radius_factor,
+            corr_factor=cfg.ransac_corr_factor,
+        )
+        T = _gicp_pyramid(src, tgt, cfg, glob.T)
+        ok, T_odo = _odometry(src, tgt, T, cfg)
+        dt, dr = transform_error(T_odo, T)
+        if ok and dt <= cfg.max_correction_m and dr <= cfg.max_correction_deg:
+            T = T_odo
+        check = pw.evaluate(src["check"], tgt["check"], T, corr)
+        scored.append(
+            (
+                pw.evaluate(src["obj_check"], tgt["obj_check"], T, corr),
+                PairOutcome(T, "global", "fpfh+icp", check, False),
+            )
+        )
+    obj_res, best = max(scored, key=lambda sc: (round(sc[0].fitness, 2), -sc[0].rmse))
+    best.verified = bool(
+        obj_res.fitness >= cfg.min_fitness and best.check.fitness >= cfg.min_fitness and best.check.rmse <= cfg.max_rmse
     )
-    T = _gicp_pyramid(src, tgt, cfg, glob.T)
-    res = pw.evaluate(src["check"], tgt["check"], T, cfg.check_voxel * cfg.check_corr_factor)
-    # the arm's prior has failed: the global result only has to pass the overlap and residual checks
-    if res.fitness >= cfg.min_fitness and res.rmse <= cfg.max_rmse:
-        return PairOutcome(T, "global", "fpfh+icp", res, True)
-    candidates.append(PairOutcome(T, "global", "fpfh+icp", res, False))
-    return max(candidates, key=lambda c: (c.check.fitness, -c.check.rmse))
+    return best
 
 
 def _levels(d: dict, cfg: StaticConfig) -> None:

@@ -28,7 +28,9 @@ def optimise(
     for pose in initial:
         graph.nodes.append(reg.PoseGraphNode(np.asarray(pose, dtype=np.float64)))
     for s, t, T, info in edges:
-        graph.edges.append(reg.PoseGraphEdge(s, t, np.asarray(T, dtype=np.float64), np.asarray(info), uncertain=False))
+        # edges to the anchor are the spanning tree; the others are loop closures the optimiser may prune
+        # (line process) when they disagree with the rest: that is what saves a view from one bad pair
+        graph.edges.append(reg.PoseGraphEdge(s, t, np.asarray(T, dtype=np.float64), np.asarray(info), uncertain=t != 0))
     option = reg.GlobalOptimizationOption(
         max_correspondence_distance=max_corr,
         edge_prune_threshold=0.25,
