@@ -82,7 +82,8 @@ def _sim_clouds(names: list[str], seed: int) -> dict[str, tuple[np.ndarray, np.n
     return out
 
 
-def _mesh_clouds(names: list[str], seed: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+def _mesh_clouds(names: list[str], seed: int, dense_points: int = 200_000
+                 ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Fallback without the sim: HOPE meshes (cm, y up) sampled and cut to what three cameras see."""
     from pathlib import Path
 
@@ -96,7 +97,7 @@ def _mesh_clouds(names: list[str], seed: int) -> dict[str, tuple[np.ndarray, np.
         mesh.rotate(np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]]), center=np.zeros(3))  # y up -> z up
         v = np.asarray(mesh.vertices)
         mesh.translate(np.array([OBJECT_XY[0], OBJECT_XY[1], -v[:, 2].min()]) - np.r_[v[:, :2].mean(0), 0])
-        dense = mesh.sample_points_uniformly(200_000)
+        dense = mesh.sample_points_uniformly(dense_points)
         height = np.asarray(dense.points)[:, 2].max()
         center = np.array([*OBJECT_XY, height / 2])
         cams, visible = [], set()
