@@ -34,10 +34,11 @@ BACKGROUND_RGB = np.array([55, 58, 62], dtype=np.uint8)
 
 @dataclass(frozen=True)
 class TableSpec:
-    """The table: a box whose top is the plane z = 0 of ``base`` (docs/conventions.md)."""
+    """The table: a box whose top is the plane z = 0 of ``base`` (docs/conventions.md), spanning well
+    beyond the arm's reach around the object's default place (0.5, 0)."""
 
-    center_xy: tuple[float, float] = (0.4, 0.0)
-    size_xy: tuple[float, float] = (1.2, 1.2)
+    center_xy: tuple[float, float] = (0.5, 0.0)
+    size_xy: tuple[float, float] = (1.6, 1.6)
     thickness: float = 0.04
     texel_m: float = 0.002  # resolution of the procedural top texture
     base_rgb: tuple[int, int, int] = (176, 146, 110)  # light wood

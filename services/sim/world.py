@@ -29,7 +29,7 @@ from services.sim.render import RenderResult, RenderScene, TableSpec, render
 from services.sim.sensor_model import d435_intrinsics
 
 #: Where an object stands by default (docs/conventions.md).
-DEFAULT_OBJECT_XY = (0.36, 0.0)
+DEFAULT_OBJECT_XY = (0.50, 0.0)
 _STREAM_SESSION, _STREAM_FRAME, _STREAM_GRASP, _STREAM_PLACE, _STREAM_TURN = range(5)
 _CONTACT_SAMPLES = 40000
 

@@ -14,10 +14,11 @@ from services.sim.catalogue import load_object
 from services.sim.errors import SimInputError
 from services.sim.gripper import GripperSpec
 from services.sim.sensor_model import d435_intrinsics
-from services.sim.world import SimStateError, World, default_object_pose, yaw_of
+from services.sim.world import DEFAULT_OBJECT_XY, SimStateError, World, default_object_pose, yaw_of
 from tests.sim.meshes import write_box_ply
 
-OBJ_XY = np.array([0.36, 0.0])
+OBJ_XY = np.array(DEFAULT_OBJECT_XY)
+FRONT_X = OBJ_XY[0] - 0.03  # the 60 mm box's face towards the robot
 SMALL = d435_intrinsics(320, 240)
 
 
@@ -27,7 +28,7 @@ def box(tmp_path):
     return load_object(str(write_box_ply(tmp_path, (0.06, 0.06, 0.15), name="carton")))
 
 
-def frontal(x: float = 0.36, y: float = 0.0, z: float = 0.075, yaw_deg: float = 0.0) -> np.ndarray:
+def frontal(x: float = OBJ_XY[0], y: float = 0.0, z: float = 0.075, yaw_deg: float = 0.0) -> np.ndarray:
     """Gripper approaching along base +x (x = approach, y = across the fingers, z = up)."""
     return make_transform(rotation_about_axis([0, 0, 1], np.radians(yaw_deg)), [x, y, z])
 
@@ -57,18 +58,18 @@ def test_a_grasp_too_shallow_for_the_retracted_pads_fails(box):
     """With the fingers 60 mm apart the pads sit 6.5 mm behind the TCP: a TCP just 5 mm inside the box
     front leaves the pads almost entirely in front of it."""
     w = World(box)
-    out = w.close_gripper(frontal(x=0.33 + 0.005 - 0.02), 0.0)  # pad tips end 1.5 mm - 6.5 mm short
+    out = w.close_gripper(frontal(x=FRONT_X + 0.005 - 0.02), 0.0)  # pad tips end 1.5 mm - 6.5 mm short
     assert (out.success, out.reason) == (False, "nothing_between_pads")
 
 
 @pytest.mark.parametrize("pose,opening,reason", [
     (frontal(y=0.2), None, "nothing_between_pads"),  # beside the object
-    (frontal(x=0.50), None, "nothing_between_pads"),  # in front of it, fingers in the air
+    (frontal(x=OBJ_XY[0] + 0.14), None, "nothing_between_pads"),  # past it, fingers in the air
     (frontal(z=0.005), None, "pad_hits_table"),  # pads below the table top
     (frontal(), 0.04, "pad_collides_with_object"),  # opened narrower than the object
     (frontal(y=0.05), None, "pad_collides_with_object"),  # one pad inside the object
-    # pad tips reach 0.3 mm past the box's front face (x = 0.33) once closed on its 60 mm
-    (frontal(x=0.33 - GripperSpec().pad_center_x(0.06) - GripperSpec().pad_length / 2 + 0.0003), None,
+    # pad tips reach 0.3 mm past the box's front face once closed on its 60 mm
+    (frontal(x=FRONT_X - GripperSpec().pad_center_x(0.06) - GripperSpec().pad_length / 2 + 0.0003), None,
      "insufficient_contact"),
 ])
 def test_unsound_grasps_fail_and_say_why(box, pose, opening, reason):
@@ -106,7 +107,8 @@ def test_held_object_follows_the_gripper_and_is_set_down_upright(box):
     w.move_gripper(lift)
     assert w.true_object_pose()[2, 3] == pytest.approx(0.08, abs=1e-9)
     turn = make_transform(rotation_about_axis([0, 0, 1], np.radians(30.0)))
-    turned = make_transform(translation=[0.36, 0, 0]) @ turn @ make_transform(translation=[-0.36, 0, 0]) @ lift
+    c = np.array([OBJ_XY[0], OBJ_XY[1], 0.0])
+    turned = make_transform(translation=c) @ turn @ make_transform(translation=-c) @ lift
     tilted = turned @ make_transform(rotation_about_axis([1, 0, 0], np.radians(6.0)))
     w.move_gripper(tilted)
     np.testing.assert_allclose(w.true_object_pose(), tilted @ T_go, atol=1e-12)
