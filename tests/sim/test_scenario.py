@@ -11,7 +11,7 @@ from PIL import Image
 from scipy.spatial import cKDTree
 
 from common.geometry import yaw_deg_about
-from common.session_folder import read_session
+from common.session_folder import read_scan, read_session
 from services.sim.catalogue import load_object
 from services.sim.render import LABEL_OBJECT
 from services.sim.scenario import ScanPoses, camera_look_at, simulated_views, true_object_points, write_session
@@ -122,6 +122,11 @@ def test_write_session(tmp_path, cube):
         assert meta["commanded_turn_deg"] == 30.0 * k and meta["intrinsics"]["width"] == 320
         np.testing.assert_array_equal(np.asarray(Image.open(d / "depth.png")), f.depth)
         np.testing.assert_array_equal(np.asarray(Image.open(d / "color.png").convert("RGB")), f.color)
+    # read back through the common reader: same frame, and its ground truth still usable
+    back = read_scan(path, 1, 0)
+    np.testing.assert_array_equal(back.depth, views[1][0].depth)
+    np.testing.assert_allclose(back.T_base_camera_true, views[1][0].T_base_camera_true)
+    np.testing.assert_allclose(true_object_points(back, 500), true_object_points(views[1][0], 500))
 
 
 @pytest.mark.slow
