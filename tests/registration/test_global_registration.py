@@ -10,6 +10,7 @@ from common.geometry import invert, transform_points
 from services.registration.dynamic.fourpcs_common import PointCloudInputError
 from services.registration.dynamic.global_registration import (
     PAPER_OVERLAPS,
+    GlobalRegistrationConfig,
     global_register,
     preprocess,
     refine_icp,
@@ -39,7 +40,8 @@ def test_methods_recover_the_known_transform_after_icp(hippo_views, method):
 @needs_hippo
 def test_4pcs_runs_the_paper_overlaps_and_keeps_the_best(hippo_views):
     src, tgt = hippo_views
-    res = global_register(src, tgt, "4pcs", voxel=0.008, seed=0)
+    paper = GlobalRegistrationConfig(fourpcs_skip_after_confirmed=False)
+    res = global_register(src, tgt, "4pcs", voxel=0.008, seed=0, config=paper)
     per_overlap = res.extra["scores_per_overlap"]
     assert sorted(per_overlap) == sorted(PAPER_OVERLAPS)
     assert res.overlap in PAPER_OVERLAPS
@@ -47,6 +49,11 @@ def test_4pcs_runs_the_paper_overlaps_and_keeps_the_best(hippo_views):
     assert res.score == pytest.approx(max(per_overlap.values()), abs=0.05)
     rms, rot = _errors(res.T, invert(T_KNOWN), src)
     assert rot < 5.0 and rms < 0.008  # raw: within delta
+    fast = global_register(src, tgt, "4pcs", voxel=0.008, seed=0)  # default: stop once a pose is confirmed
+    ran = list(fast.extra["scores_per_overlap"])
+    assert ran == list(PAPER_OVERLAPS[: len(ran)]) and fast.n_bases_tried <= res.n_bases_tried
+    rms, rot = _errors(fast.T, invert(T_KNOWN), src)
+    assert rot < 5.0 and rms < 0.008
 
 
 @needs_hippo

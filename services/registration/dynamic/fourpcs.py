@@ -32,7 +32,8 @@ Everything is vectorised numpy/scipy (cKDTree is C), so there is no JIT to warm 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from time import perf_counter
 
 import numpy as np
@@ -79,68 +80,114 @@ def register_4pcs(source_xyz: np.ndarray, target_xyz: np.ndarray, *, overlap: fl
     to ``config.verify_size`` points; ``T`` is the identity with ``lcp_score = 0`` if no base found any
     congruent set.
     """
+    return register_4pcs_overlaps(source_xyz, target_xyz, overlaps=(overlap,), delta=delta,
+                                  max_time_s=max_time_s, seed=seed, sample_size=sample_size,
+                                  source_normals=source_normals, target_normals=target_normals,
+                                  max_bases=max_bases, terminate_lcp=terminate_lcp, config=config)[0]
+
+
+def register_4pcs_overlaps(source_xyz: np.ndarray, target_xyz: np.ndarray, *,
+                           overlaps: Sequence[float] = (0.9, 0.85, 0.8), delta: float = 0.008,
+                           max_time_s: float = 2.0, seed: int = 0, sample_size: int = 300,
+                           source_normals: np.ndarray | None = None, target_normals: np.ndarray | None = None,
+                           max_bases: int | None = None, terminate_lcp: float | None = None,
+                           skip_after_confirmed: bool = False,
+                           config: FourPCSConfig | None = None) -> list[GlobalResult]:
+    """4PCS once per overlap value (the paper's 0.9, 0.85, 0.8), sharing samples, pair index and grids.
+
+    One result per overlap that ran, in order; ``max_time_s`` is per overlap. The paper runs every overlap
+    and keeps the best fitness; with ``skip_after_confirmed`` the remaining overlaps are skipped once a run
+    ends with its pose confirmed by ``config.stop_after_confirmations`` further bases (the same pose would
+    very likely be found again), which saves most of the time on easy pairs.
+    """
     cfg = config or FourPCSConfig()
-    t_start = perf_counter()
-    src = as_xyz(source_xyz, "source_xyz", min_points=4)
-    tgt = as_xyz(target_xyz, "target_xyz", min_points=4)
-    src_n = _unit_rows(as_optional_rows(source_normals, src.shape[0], "source_normals"))
-    tgt_n = _unit_rows(as_optional_rows(target_normals, tgt.shape[0], "target_normals"))
-    use_normals = src_n is not None and tgt_n is not None
-    if not 0.0 < overlap <= 1.0:
-        raise PointCloudInputError(f"overlap must be in (0, 1], got {overlap}", code="bad_value",
-                                   detail={"field": "overlap"})
+    overlaps = [float(o) for o in overlaps]
+    if not overlaps or not all(0.0 < o <= 1.0 for o in overlaps):
+        raise PointCloudInputError(f"overlaps must be a non-empty list of values in (0, 1], got {overlaps}",
+                                   code="bad_value", detail={"field": "overlap"})
     if not delta > 0.0:
         raise PointCloudInputError(f"delta must be > 0, got {delta}", code="bad_value",
                                    detail={"field": "delta"})
-    rng = np.random.default_rng(seed)
-    if max_bases is None:
-        max_bases = default_max_bases(overlap)
+    problem = _Problem(source_xyz, target_xyz, source_normals, target_normals, delta=delta,
+                       sample_size=sample_size, max_overlap=max(overlaps), seed=seed, cfg=cfg)
+    results = []
+    for k, overlap in enumerate(overlaps):
+        t_run = perf_counter()
+        res = _search(problem, overlap, rng=np.random.default_rng([seed, k]), max_time_s=max_time_s,
+                      max_bases=default_max_bases(overlap) if max_bases is None else max_bases,
+                      terminate_lcp=terminate_lcp, cfg=cfg)
+        setup = problem.setup_seconds if k == 0 else 0.0
+        results.append(replace(res, seconds=perf_counter() - t_run + setup))
+        if skip_after_confirmed and cfg.stop_after_confirmations and \
+                res.extra["confirmations"] >= cfg.stop_after_confirmations:
+            break
+    return results
 
-    s_idx = _sample(src.shape[0], sample_size, rng)
-    t_idx = _sample(tgt.shape[0], int(round(sample_size * cfg.target_sample_factor)), rng)
-    S, Q = src[s_idx], tgt[t_idx]
-    Sn = src_n[s_idx] if use_normals else None
-    Qn = tgt_n[t_idx] if use_normals else None
-    verify = src[_sample(src.shape[0], cfg.verify_size, rng)]
-    quick = verify[_sample(verify.shape[0], cfg.quick_verify_size, rng)]
-    target_tree = cKDTree(tgt)
-    distance_grid = _DistanceGrid(tgt, delta)
 
-    diameter = _diameter(S)
-    max_base = overlap * diameter
-    pair_index = _PairIndex(Q, max_len=max_base + 2.0 * delta, normals=Qn)
+class _Problem:
+    """Everything about a (source, target) pair that does not depend on the overlap value."""
 
+    def __init__(self, source_xyz, target_xyz, source_normals, target_normals, *, delta: float,
+                 sample_size: int, max_overlap: float, seed: int, cfg: FourPCSConfig):
+        t0 = perf_counter()
+        src = as_xyz(source_xyz, "source_xyz", min_points=4)
+        tgt = as_xyz(target_xyz, "target_xyz", min_points=4)
+        src_n = _unit_rows(as_optional_rows(source_normals, src.shape[0], "source_normals"))
+        tgt_n = _unit_rows(as_optional_rows(target_normals, tgt.shape[0], "target_normals"))
+        self.use_normals = src_n is not None and tgt_n is not None
+        rng = np.random.default_rng(seed)
+        s_idx = _sample(src.shape[0], sample_size, rng)
+        t_idx = _sample(tgt.shape[0], int(round(sample_size * cfg.target_sample_factor)), rng)
+        self.S, self.Q = src[s_idx], tgt[t_idx]
+        self.Sn = src_n[s_idx] if self.use_normals else None
+        Qn = tgt_n[t_idx] if self.use_normals else None
+        self.verify = src[_sample(src.shape[0], cfg.verify_size, rng)]
+        self.quick = self.verify[_sample(self.verify.shape[0], cfg.quick_verify_size, rng)]
+        self.target_tree = cKDTree(tgt)
+        self.distance_grid = _DistanceGrid(tgt, delta)
+        self.delta = float(delta)
+        self.diameter = _diameter(self.S)
+        self.pair_index = _PairIndex(self.Q, max_len=max_overlap * self.diameter + 2.0 * delta, normals=Qn)
+        self.centre = self.S.mean(axis=0)
+        self.setup_seconds = perf_counter() - t0
+
+
+def _search(p: _Problem, overlap: float, *, rng: np.random.Generator, max_time_s: float, max_bases: int,
+            terminate_lcp: float | None, cfg: FourPCSConfig) -> GlobalResult:
+    """The 4PCS loop for one overlap value: bases, congruent sets, staged LCP, early exits."""
+    t_start = perf_counter()
+    delta = p.delta
+    max_base = overlap * p.diameter
     best_T, best_lcp, best_score, n_bases = np.eye(4), 0.0, 0.0, 0
     confirmations = 0  # later bases that found the current best pose again
-    centre = S.mean(axis=0)
     n_congruent_total = 0
     while n_bases < max_bases and perf_counter() - t_start < max_time_s:
         n_bases += 1
-        base = _select_base(S, rng, max_base=max_base, coplanar_tol=delta, trials=cfg.triangle_trials)
+        base = _select_base(p.S, rng, max_base=max_base, coplanar_tol=delta, trials=cfg.triangle_trials)
         if base is None:
             continue
         quad, r1, r2 = base
-        B = S[quad]
-        BN = Sn[quad] if use_normals else None
-        quads = _congruent_sets(Q, pair_index, B, BN, r1, r2, delta, cfg, rng)
+        B = p.S[quad]
+        BN = p.Sn[quad] if p.use_normals else None
+        quads = _congruent_sets(p.Q, p.pair_index, B, BN, r1, r2, delta, cfg, rng)
         if quads.shape[0] == 0:
             continue
         n_congruent_total += int(quads.shape[0])
-        R, t, rms = _kabsch_batch(B, Q[quads])
+        R, t, rms = _kabsch_batch(B, p.Q[quads])
         ok = rms <= cfg.max_kabsch_rms_factor * delta
         if not np.any(ok):
             continue
         R, t = R[ok], t[ok]
-        quick_scores = distance_grid.weighted_lcp(quick, R, t)
+        quick_scores = p.distance_grid.weighted_lcp(p.quick, R, t)
         order = np.argsort(-quick_scores, kind="stable")[: cfg.full_verify_top]
         order = order[quick_scores[order] >= 0.8 * best_score]  # staged early rejection
         if order.size == 0:
             continue
-        hard, soft = lcp_batch(verify, R[order], t[order], target_tree, delta)
+        hard, soft = lcp_batch(p.verify, R[order], t[order], p.target_tree, delta)
         k = int(np.argmax(soft))
         T_k = np.eye(4)
         T_k[:3, :3], T_k[:3, 3] = R[order[k]], t[order[k]]
-        same_pose = best_score > 0 and _same_pose(T_k, best_T, centre, delta, cfg.confirm_angle_deg)
+        same_pose = best_score > 0 and _same_pose(T_k, best_T, p.centre, delta, cfg.confirm_angle_deg)
         if soft[k] > best_score:
             best_score, best_lcp, best_T = float(soft[k]), float(hard[k]), T_k
         confirmations = confirmations + 1 if same_pose else (0 if best_T is T_k else confirmations)
@@ -150,8 +197,8 @@ def register_4pcs(source_xyz: np.ndarray, target_xyz: np.ndarray, *, overlap: fl
             break
     return GlobalResult(T=best_T, lcp_score=best_lcp, score=best_score, n_bases_tried=n_bases,
                         seconds=perf_counter() - t_start, method="4pcs", overlap=float(overlap),
-                        extra={"n_congruent": n_congruent_total, "diameter": diameter,
-                               "used_normals": use_normals, "confirmations": confirmations})
+                        extra={"n_congruent": n_congruent_total, "diameter": p.diameter,
+                               "used_normals": p.use_normals, "confirmations": confirmations})
 
 
 def _same_pose(Ta: np.ndarray, Tb: np.ndarray, centre: np.ndarray, delta: float, angle_deg: float) -> bool:

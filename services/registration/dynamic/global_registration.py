@@ -22,7 +22,7 @@ import numpy as np
 import open3d as o3d
 from scipy.spatial import cKDTree
 
-from services.registration.dynamic.fourpcs import FourPCSConfig, lcp_batch, register_4pcs
+from services.registration.dynamic.fourpcs import FourPCSConfig, lcp_batch, register_4pcs_overlaps
 from services.registration.dynamic.fourpcs_common import (
     GlobalResult,
     PointCloudInputError,
@@ -50,6 +50,8 @@ class GlobalRegistrationConfig:
     fgr_distance_factor: float = 0.5
     fourpcs_max_time_s: float = 2.0
     fourpcs_sample_size: int = 300
+    # the paper runs all three overlaps; skipping the rest once a run's pose is confirmed is our speed-up
+    fourpcs_skip_after_confirmed: bool = True
     fourpcs: FourPCSConfig = FourPCSConfig()
 
 
@@ -60,9 +62,10 @@ def global_register(source: np.ndarray | o3d.geometry.PointCloud, target: np.nda
                     config: GlobalRegistrationConfig | None = None) -> GlobalResult:
     """Global (initial-guess-free) ``T`` with ``target ~ T @ source``, by ``method`` at ``voxel`` metres.
 
-    ``overlap`` is used by 4PCS only; a sequence runs 4PCS once per value (seeds ``seed``, ``seed + 1``, ...)
-    and keeps the highest weighted LCP, as the paper does with 0.9, 0.85, 0.8. The result's ``seconds``
-    include down-sampling, normals and features.
+    ``overlap`` is used by 4PCS only; a sequence runs 4PCS once per value and keeps the highest weighted
+    LCP, as the paper does with 0.9, 0.85, 0.8 (unless ``config.fourpcs_skip_after_confirmed``, on by
+    default, stops after a run whose pose was confirmed). The result's ``seconds`` include down-sampling,
+    normals and features.
     """
     cfg = config or GlobalRegistrationConfig()
     if method not in METHODS:
@@ -82,10 +85,10 @@ def global_register(source: np.ndarray | o3d.geometry.PointCloud, target: np.nda
             raise PointCloudInputError("overlap list is empty", code="bad_value", detail={"field": "overlap"})
         src_xyz, tgt_xyz = np.asarray(src.points), np.asarray(tgt.points)
         src_n, tgt_n = np.asarray(src.normals), np.asarray(tgt.normals)
-        runs = [register_4pcs(src_xyz, tgt_xyz, overlap=o, delta=voxel, seed=seed + k,
-                              max_time_s=cfg.fourpcs_max_time_s, sample_size=cfg.fourpcs_sample_size,
-                              source_normals=src_n, target_normals=tgt_n, config=cfg.fourpcs)
-                for k, o in enumerate(overlaps)]
+        runs = register_4pcs_overlaps(src_xyz, tgt_xyz, overlaps=overlaps, delta=voxel, seed=seed,
+                                      max_time_s=cfg.fourpcs_max_time_s, sample_size=cfg.fourpcs_sample_size,
+                                      source_normals=src_n, target_normals=tgt_n,
+                                      skip_after_confirmed=cfg.fourpcs_skip_after_confirmed, config=cfg.fourpcs)
         best = max(runs, key=lambda r: r.score)
         result = replace(best, n_bases_tried=sum(r.n_bases_tried for r in runs),
                          extra={**best.extra, "scores_per_overlap": {r.overlap: r.score for r in runs}})
