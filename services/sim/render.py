@@ -120,6 +120,9 @@ class RenderScene:
         if table is not None:
             gid = self.scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(table_mesh(table)))
             self.table_gid = int(gid)
+        # Open3D commits (builds the BVH) lazily on the first query; do it here, once, so frames rendered
+        # from several threads never race on it
+        self.scene.cast_rays(o3d.core.Tensor(np.array([[0, 0, 0, 0, 0, 1]], dtype=np.float32)))
 
 
 @dataclass

@@ -240,3 +240,17 @@ def test_world_loads_a_user_mesh_with_scale_and_up_axis(tmp_path):
     w = World(str(path), scale=0.01, up_axis="y")
     np.testing.assert_allclose(w.obj.extent, [0.06, 0.06, 0.15], atol=1e-9)
     assert w.close_gripper(frontal(), 0.0).success
+
+
+def test_concurrent_renders_equal_sequential_ones(box):
+    """The service renders from worker threads: frames must not depend on interleaving."""
+    import concurrent.futures as cf
+
+    w = World(box, profile="hand-turned", seed=1)
+    T_cam = make_transform(np.array([[0.0, 0, 1], [-1, 0, 0], [0, -1, 0]]), [0.2, 0.0, 0.1])
+    with cf.ThreadPoolExecutor(3) as ex:
+        got = list(ex.map(lambda i: w.render_frame(T_cam, SMALL, i), range(6)))
+    for i, f in enumerate(got):
+        ref = World(box, profile="hand-turned", seed=1).render_frame(T_cam, SMALL, i)
+        np.testing.assert_array_equal(f.depth, ref.depth)
+        np.testing.assert_array_equal(f.color, ref.color)
