@@ -70,6 +70,9 @@ class CandidateRegion:
     indices: np.ndarray
     curvature: np.ndarray
     plane_distance: np.ndarray
+    normals: np.ndarray | None = None
+    """Normals estimated from the same neighbourhood as the curvature (in the cloud's frame); None =
+    use the input normals."""
 
 
 def central_slice(frame: ObjectFrame, thickness: float) -> np.ndarray:
@@ -93,16 +96,19 @@ def voxel_thin(indices: np.ndarray, local: np.ndarray, voxel: float) -> np.ndarr
     return indices[np.sort(first)]
 
 
-def surface_variation(points: np.ndarray, query: np.ndarray, radius: float, k: int = 20) -> np.ndarray:
-    """PCL's curvature λmin / (λ0 + λ1 + λ2) of each query point's neighbourhood in ``points``.
+def local_surface(points: np.ndarray, query: np.ndarray, radius: float, k: int = 20
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """PCL's normal estimation at each query point: (curvature λmin / (λ0 + λ1 + λ2), unit normal =
+    the eigenvector of λmin) of its neighbourhood in ``points``.
 
     The neighbourhood is the ``k`` nearest points within ``radius`` (a KD-tree over the small patch
-    around the regions, not over the whole cloud).
+    around the regions, not over the whole cloud). The normal's sign is arbitrary (the ranking uses
+    |cos|).
     """
     if len(query) == 0:
-        return np.zeros(0)
+        return np.zeros(0), np.zeros((0, 3))
     if len(points) < 3:
-        return np.zeros(len(query))
+        return np.zeros(len(query)), np.tile([0.0, 0.0, 1.0], (len(query), 1))
     origin = query.mean(axis=0)  # centred coordinates keep the second moments precise
     P, Q = points - origin, query - origin
     k = min(k, len(P))
@@ -116,11 +122,19 @@ def surface_variation(points: np.ndarray, query: np.ndarray, radius: float, k: i
     mean = nb.sum(axis=1) / np.maximum(n, 1.0)
     cov = np.einsum("qki,qkj->qij", nb, P[idx]) / np.maximum(n, 1.0)[:, :, None] \
         - mean[:, :, None] * mean[:, None, :]
-    eig = np.linalg.eigvalsh(cov)
+    eig, vec = np.linalg.eigh(cov)
     trace = eig.sum(axis=1)
     curv = np.abs(eig[:, 0]) / np.where(trace > 1e-18, trace, 1.0)
-    curv[(n[:, 0] < 3) | (trace <= 1e-18)] = 0.0
-    return curv
+    degenerate = (n[:, 0] < 3) | (trace <= 1e-18)
+    curv[degenerate] = 0.0
+    normals = vec[:, :, 0].copy()
+    normals[degenerate] = np.nan  # callers fall back to the input normal there
+    return curv, normals
+
+
+def surface_variation(points: np.ndarray, query: np.ndarray, radius: float, k: int = 20) -> np.ndarray:
+    """Curvature only (see :func:`local_surface`)."""
+    return local_surface(points, query, radius, k)[0]
 
 
 def extreme_point(slice_local: np.ndarray, col: int, side: int, tolerance: float) -> int:
@@ -137,7 +151,7 @@ def extreme_point(slice_local: np.ndarray, col: int, side: int, tolerance: float
 
 
 def candidate_regions(frame: ObjectFrame, fingertip: float, slice_thickness: float, voxel: float,
-                      curvature_radius: float, seed_tolerance: float = 0.002
+                      curvature_radius: float, seed_tolerance: float = 0.002, refit_normals: bool = True
                       ) -> tuple[list[CandidateRegion], int]:
     """The four candidate regions (y-min, y-max, z-min, z-max); empty list when the slice is empty.
 
@@ -164,10 +178,12 @@ def candidate_regions(frame: ObjectFrame, fingertip: float, slice_thickness: flo
     # radius whatever the density
     near = voxel_thin(np.unique(np.concatenate(near_all)), local, 0.25 * curvature_radius)
     all_kept = np.concatenate([f[3] for f in found])
-    curv_all = surface_variation(local[near], local[all_kept], curvature_radius)
+    curv_all, normals_local = local_surface(local[near], local[all_kept], curvature_radius)
+    normals_all = normals_local @ frame.rotation.T if refit_normals else None
     regions, start = [], 0
     for axis_name, side, seed, kept in found:
-        curv = curv_all[start:start + len(kept)]
+        span = slice(start, start + len(kept))
         start += len(kept)
-        regions.append(CandidateRegion(axis_name, side, seed, kept, curv, np.abs(local[kept, 0])))
+        regions.append(CandidateRegion(axis_name, side, seed, kept, curv_all[span], np.abs(local[kept, 0]),
+                                       None if normals_all is None else normals_all[span]))
     return regions, len(slice_idx)

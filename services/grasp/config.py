@@ -83,6 +83,10 @@ class GraspPlannerConfig:
     (GeoGrasp voxelises its regions far more coarsely, at gripTip/2 = 12.5-15 mm)."""
     curvature_radius: float = 0.01
     """Neighbourhood radius of the surface-variation curvature of candidate points."""
+    refit_normals: bool = True
+    """Rank with normals re-estimated from each candidate's 1 cm neighbourhood (the same PCA that gives
+    its curvature, as GeoGrasp does with PCL's NormalEstimation) rather than the input normals: dense
+    scans estimated with a small neighbourhood carry normals too noisy for the antipodal test."""
     min_region_points: int = 3
     candidates_per_axis: int = 1
     """Grasps kept per region axis (the paper: the best one)."""

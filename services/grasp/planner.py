@@ -178,7 +178,7 @@ def _plan_frontal(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, cf
         if n_hit:
             rej.add("collides_with_object", example={**example, "box": which, "points": n_hit})
             continue
-        nrm = inp.normals[[pair.j, pair.i]] if swapped else inp.normals[[pair.i, pair.j]]
+        nrm = np.array([pair.n_j, pair.n_i] if swapped else [pair.n_i, pair.n_j])
         out.append(_make_grasp("frontal", axis, pair, R, np.array([p_plus, p_minus]), nrm, inp,
                                cfg.grasp_depth, cfg.frontal_offsets_deg, center, cfg, boxes))
     out.sort(key=lambda gr: -gr.rank)
@@ -235,7 +235,7 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
             continue
         mid_height = float(0.5 * (p1 + p2) @ inp.up + inp.offset)
         depth = float(np.clip(mid_height - cfg.table_clearance, 0.0, cfg.grasp_depth))
-        n_pair = nrm[[pair.j, pair.i]] if swapped else nrm[[pair.i, pair.j]]
+        n_pair = np.array([pair.n_j, pair.n_i] if swapped else [pair.n_i, pair.n_j])
         out.append(_make_grasp("top_down", axis, pair, R, np.array([p_plus, p_minus]), n_pair, inp,
                                depth, cfg.top_down_offsets_deg, center, cfg, boxes))
     out.sort(key=lambda gr: -gr.rank)
@@ -249,7 +249,8 @@ def _ranked_pairs(xyz: np.ndarray, normals: np.ndarray, up: np.ndarray, frame: O
     """The valid pairs of the y and the z regions, best first per axis (at most
     ``max_checks_per_axis`` each); pair-level rejections go to ``rej``."""
     regions, n_slice = candidate_regions(frame, cfg.gripper.pad_width, cfg.slice_thickness,
-                                         cfg.region_voxel, cfg.curvature_radius)
+                                         cfg.region_voxel, cfg.curvature_radius,
+                                         refit_normals=cfg.refit_normals)
     if not regions:
         rej.add("too_few_points", example={"kind": kind, "slice_points": n_slice})
         return []

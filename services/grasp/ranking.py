@@ -41,6 +41,8 @@ class RankedPair:
     j: int  # cloud index of contact 2
     rank: float
     metrics: dict[str, float]
+    n_i: np.ndarray  # the normals the ranking used
+    n_j: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -53,12 +55,20 @@ class PairRanking:
     n_pairs: int
 
 
+def _region_normals(region: CandidateRegion, normals: np.ndarray) -> np.ndarray:
+    """The region's own (re-estimated) normals where it has them, else the input normals."""
+    given = normals[region.indices]
+    if region.normals is None:
+        return given
+    return np.where(np.isfinite(region.normals).all(axis=1)[:, None], region.normals, given)
+
+
 def rank_region_pair(a: CandidateRegion, b: CandidateRegion, points: np.ndarray, normals: np.ndarray,
                      main_axis: np.ndarray, up: np.ndarray, cfg: GraspPlannerConfig, top_k: int
                      ) -> PairRanking:
     """Rank all pairs between regions ``a`` and ``b`` and keep the ``top_k`` best valid ones."""
     pa, pb = points[a.indices], points[b.indices]
-    na, nb = normals[a.indices], normals[b.indices]
+    na, nb = _region_normals(a, normals), _region_normals(b, normals)
     line = pb[None, :, :] - pa[:, None, :]  # (A, B, 3)
     width = np.linalg.norm(line, axis=2)
     unit = line / np.maximum(width, 1e-12)[:, :, None]
@@ -94,7 +104,7 @@ def rank_region_pair(a: CandidateRegion, b: CandidateRegion, points: np.ndarray,
             "cos_alpha1": float(cos_a1[ia, ib]), "cos_alpha2": float(cos_a2[ia, ib]),
             "r1": float(r1[ia, ib]), "r2": float(r2[ia, ib]), "rank": float(rank[ia, ib]),
         }
-        return RankedPair(int(a.indices[ia]), int(b.indices[ib]), m["rank"], m)
+        return RankedPair(int(a.indices[ia]), int(b.indices[ib]), m["rank"], m, na[ia], nb[ib])
 
     def best_of(mask: np.ndarray, k: int) -> list[RankedPair]:
         flat = np.flatnonzero(mask)

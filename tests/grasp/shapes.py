@@ -11,7 +11,7 @@ import numpy as np
 
 from common.messages import Plane
 
-OBJECT_XY = np.array([0.36, 0.0])
+OBJECT_XY = np.array([0.50, 0.0])  # docs/conventions.md
 CAMERA = np.array([0.10, 0.0, 0.30])  # a wrist-camera position in front of and above the object
 
 

@@ -195,12 +195,12 @@ def test_low_object_collides_with_the_table():
 def test_pads_colliding_with_the_object_are_rejected():
     """A can with a ring (like a lid rim or a label band) 15 mm outside its wall, just above the slice:
     every pad lands in the ring."""
-    p, n = S.soup_can(view_from=S.scan_cameras())
+    p, n = S.cylinder(0.034, 0.16, view_from=S.scan_cameras())  # tall, so the ring leaves x vertical
     rng = np.random.default_rng(0)
     th = rng.uniform(0, 2 * np.pi, 4000)
     rr = rng.uniform(0.034 + 0.015, 0.034 + 0.03, 4000)
-    zz = rng.uniform(0.056, 0.062, 4000)
-    ring = np.column_stack([0.36 + rr * np.cos(th), rr * np.sin(th), zz])
+    zz = rng.uniform(0.086, 0.092, 4000)
+    ring = np.column_stack([S.OBJECT_XY[0] + rr * np.cos(th), S.OBJECT_XY[1] + rr * np.sin(th), zz])
     ring_n = np.column_stack([np.cos(th), np.sin(th), np.zeros_like(th)])
     plan = plan_grasps(np.vstack([p, ring]), np.vstack([n, ring_n]), S.table_plane(),
                        GraspPlannerConfig(mode="frontal"))
