@@ -81,6 +81,7 @@ class StaticConfig:
     cluster_voxel: float = 0.004  # m; DBSCAN runs on this coarser copy, labels go back by nearest point
     dbscan_eps: float = 0.012  # m
     dbscan_min_points: int = 8
+    max_support_gap: float | None = 0.02  # m; a cluster whose lowest point is higher does not stand on the table
     min_object_points: int = 30  # points of a cluster at cluster_voxel to count as an object
     select_by: Literal["nearest_point", "centroid"] = "nearest_point"
 

@@ -51,11 +51,13 @@ def isolate_object(
     min_points: int,
     min_object_points: int,
     select_by: str = "nearest_point",
+    max_support_gap: float | None = None,
 ) -> Isolation:
     """Pick the goal object's points among ``points`` (already in the table's frame, e.g. ``base``).
 
     Points between ``clearance`` and ``max_height`` above the table are clustered with DBSCAN; clusters
-    smaller than ``min_object_points`` are noise. The chosen cluster is the one nearest the seed: by its
+    smaller than ``min_object_points`` are noise, and with ``max_support_gap`` so are clusters whose lowest
+    point is more than that above the table (not standing on it). The chosen cluster is the one nearest the seed: by its
     nearest point (``nearest_point``, robust when the seed is on the object's face) or by its centroid
     (``centroid``, the paper's rule). Raises ``NoObjectError`` when no cluster qualifies.
     """
@@ -70,6 +72,11 @@ def isolate_object(
     labels = np.asarray(coarse.cluster_dbscan(eps=eps, min_points=min_points, print_progress=False))
     ids, counts = np.unique(labels[labels >= 0], return_counts=True)
     keep = ids[counts >= min_object_points]
+    if max_support_gap is not None and keep.size:
+        # an object stands on the table: a cluster whose lowest point floats higher is something else
+        # (an arm, a shelf, a chair seen over the table edge)
+        low = table.signed_distance(cpts)
+        keep = np.array([k for k in keep if low[labels == k].min() <= clearance + max_support_gap], dtype=keep.dtype)
     if keep.size == 0:
         raise NoObjectError(
             "no cluster of object size above the table",

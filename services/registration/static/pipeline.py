@@ -478,6 +478,7 @@ def register_view(frames: list[RGBDFrame], config: StaticConfig | None = None) -
                 min_points=cfg.dbscan_min_points,
                 min_object_points=cfg.min_object_points,
                 select_by=cfg.select_by,
+                max_support_gap=cfg.max_support_gap,
             )
         with sw("object"):
             obj = scene.select_by_index(np.flatnonzero(iso.mask))
