@@ -237,6 +237,16 @@ _EMPTY_VCOLS = np.zeros((1, 3), dtype=np.float32)
 _EMPTY_ALBEDO = np.zeros((1, 3), dtype=np.float32)
 
 
+def _ro(a: np.ndarray, dtype: type) -> np.ndarray:
+    """C-contiguous, read-only view of ``a`` as ``dtype``: every call of the numba kernel then has one
+    signature (numba compiles and caches one specialisation per dtype/layout/writability)."""
+    out = np.ascontiguousarray(a, dtype=dtype)
+    if out.flags.writeable:
+        out = out.view()
+        out.setflags(write=False)
+    return out
+
+
 def _object_pixel_rect(scene: RenderScene, T: np.ndarray, K: Intrinsics) -> tuple[int, int, int, int] | None:
     """Pixel rectangle (u0, u1, v0, v1) that contains the object's projected bounding box, or None when
     the box reaches behind the camera (then every ray must be cast)."""
@@ -355,10 +365,13 @@ def render(scene: RenderScene, T_base_camera: np.ndarray, intrinsics: Intrinsics
     texel = table.texel_m if table is not None else 1.0
     light = np.asarray(scene.lighting.towards_light, dtype=np.float64)
     light /= np.linalg.norm(light)
-    _compose(t_hit, gids, prims, bary, normals, dirs, T[:3, 3].astype(np.float32),
-             scene.object_gid, scene.table_gid, mode, tri_uvs, tex, tris, vcols,
-             DEFAULT_COLOR.astype(np.float64), albedo, table_tex, x0, y0, texel, light,
-             float(scene.lighting.ambient), float(scene.lighting.diffuse), BACKGROUND_RGB, color, labels, depth_true)
+    _compose(_ro(t_hit, np.float32), _ro(gids, np.uint32), _ro(prims, np.uint32), _ro(bary, np.float32),
+             _ro(normals, np.float32), _ro(dirs, np.float32), _ro(T[:3, 3], np.float32),
+             int(scene.object_gid), int(scene.table_gid), int(mode), _ro(tri_uvs, np.float32), _ro(tex, np.uint8),
+             _ro(tris, np.int32), _ro(vcols, np.float32), _ro(DEFAULT_COLOR, np.float64), _ro(albedo, np.float32),
+             _ro(table_tex, np.uint8), float(x0), float(y0), float(texel), _ro(light, np.float64),
+             float(scene.lighting.ambient), float(scene.lighting.diffuse), _ro(BACKGROUND_RGB, np.uint8),
+             color, labels, depth_true)
     depth_true = depth_true.reshape(h, w)
     color = color.reshape(h, w, 3)
     labels = labels.reshape(h, w)
