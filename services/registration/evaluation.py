@@ -34,11 +34,14 @@ F_SCORE_THRESHOLDS_M = (0.002, 0.005)
 
 @dataclass(frozen=True)
 class AlignConfig:
-    """ICP schedule of the model-to-GT alignment: correspondence distances (m), coarse to fine."""
+    """Model-to-GT alignment: every candidate gets the coarse ICP stages on a small subsample, the best one
+    the fine stages on a larger one (correspondence distances in m, coarse to fine)."""
 
-    max_correspondence_m: tuple[float, ...] = (0.02, 0.01, 0.005, 0.002)
-    iterations_per_stage: int = 40
-    max_model_points: int = 20000  # the model is randomly subsampled to this for the ICP only
+    coarse_correspondence_m: tuple[float, ...] = (0.02, 0.01)
+    fine_correspondence_m: tuple[float, ...] = (0.005, 0.002)
+    iterations_per_stage: int = 30
+    coarse_points: int = 3000
+    fine_points: int = 20000  # model points; the GT subsample is twice this
 
 
 def point_errors(query_xyz: np.ndarray, reference: np.ndarray | o3d.geometry.TriangleMesh,
@@ -114,34 +117,42 @@ def align_to_ground_truth(model_xyz: np.ndarray, gt_xyz: np.ndarray, *, init_T: 
 
     Candidates are ``init_T`` (if given) and, always, the centroid match with the model's principal axes
     rotated onto the GT's (the 4 proper sign choices) - enough for objects whose pose is unknown but whose
-    shape is recovered. The candidate with the smallest symmetric Chamfer after ICP wins.
+    shape is recovered. Each gets the coarse ICP stages on a small subsample; the one with the smallest
+    symmetric Chamfer there gets the fine stages on a larger subsample.
     """
     cfg = config or AlignConfig()
     model = as_xyz(model_xyz, "model_xyz", min_points=3)
     gt = as_xyz(gt_xyz, "gt_xyz", min_points=3)
     rng = np.random.default_rng(seed)
-    if model.shape[0] > cfg.max_model_points:
-        model = model[rng.choice(model.shape[0], cfg.max_model_points, replace=False)]
-    gt_sub = gt if gt.shape[0] <= 2 * cfg.max_model_points else \
-        gt[rng.choice(gt.shape[0], 2 * cfg.max_model_points, replace=False)]
     candidates = [] if init_T is None else [check_transform(init_T, "init_T")]
-    candidates += _principal_axes_candidates(model, gt_sub)
-    src = _to_o3d(model)
-    tgt = _to_o3d(gt_sub)
-    gt_tree = cKDTree(gt_sub)
+    candidates += _principal_axes_candidates(model, gt)
+    m_small, g_small = _subsample(model, cfg.coarse_points, rng), _subsample(gt, 2 * cfg.coarse_points, rng)
+    src, tgt = _to_o3d(m_small), _to_o3d(g_small)
+    g_tree = cKDTree(g_small)
     best_T, best_score = np.eye(4), np.inf
     for T0 in candidates:
-        T = T0
-        for dist in cfg.max_correspondence_m:
-            T = o3d.pipelines.registration.registration_icp(
-                src, tgt, dist, T, o3d.pipelines.registration.TransformationEstimationPointToPoint(),
-                o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=cfg.iterations_per_stage),
-            ).transformation
-        moved = model @ T[:3, :3].T + T[:3, 3]
-        score = gt_tree.query(moved)[0].mean() + cKDTree(moved).query(gt_sub)[0].mean()
+        T = _icp_stages(src, tgt, T0, cfg.coarse_correspondence_m, cfg.iterations_per_stage)
+        moved = m_small @ T[:3, :3].T + T[:3, 3]
+        score = g_tree.query(moved)[0].mean() + cKDTree(moved).query(g_small)[0].mean()
         if score < best_score:
-            best_T, best_score = np.array(T), score
-    return best_T
+            best_T, best_score = T, score
+    src = _to_o3d(_subsample(model, cfg.fine_points, rng))
+    tgt = _to_o3d(_subsample(gt, 2 * cfg.fine_points, rng))
+    return _icp_stages(src, tgt, best_T, cfg.fine_correspondence_m, cfg.iterations_per_stage)
+
+
+def _icp_stages(src: o3d.geometry.PointCloud, tgt: o3d.geometry.PointCloud, T: np.ndarray,
+                distances: tuple[float, ...], iterations: int) -> np.ndarray:
+    for dist in distances:
+        T = o3d.pipelines.registration.registration_icp(
+            src, tgt, dist, T, o3d.pipelines.registration.TransformationEstimationPointToPoint(),
+            o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=iterations),
+        ).transformation
+    return np.array(T)
+
+
+def _subsample(points: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    return points if points.shape[0] <= n else points[rng.choice(points.shape[0], n, replace=False)]
 
 
 def sample_mesh(mesh: o3d.geometry.TriangleMesh, n: int, *, seed: int = 0) -> np.ndarray:
