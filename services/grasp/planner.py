@@ -220,7 +220,6 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
         if not all(reach):  # lifted so far that a pad no longer covers its contact
             rej.add("collides_with_table", example={**example, "box": "fingertip", "table": "table"})
             continue
-        example = {"kind": "top_down", "axis": axis, "rank": pair.rank, "contacts": [p_plus, p_minus]}
         hit = first_overlap(boxes, below, cfg.table_clearance) if below is not None else None
         if hit:
             rej.add("collides_with_table", example={**example, "box": hit, "table": "object_below_crop"})
