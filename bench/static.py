@@ -1,0 +1,129 @@
+"""``objscan bench static``: static registration, ``paper`` profile against ``default``, on the HOPE objects.
+
+Scans come from the digital twin under the ``robot-turned`` error profile (3 scans per view, believed
+camera poses with hand-eye and joint errors, D435 noise). For each profile and view: wall time and CPU
+time of ``register_view`` (rendering excluded) and the error of each recovered scan pose relative to
+scan 0 against ground truth (see ``services/registration/static/evaluate.py`` for why relative).
+
+JSON: ``{"default": {"s_per_view", "max_trans_err_mm", "max_rot_err_deg", ...}, "paper": {same},
+"speedup_default_vs_paper", "prior": {...}, ...}``. ``prior`` is the arm's believed poses alone (no
+registration), the baseline both must beat. The target for ``default`` is <= 1 s per view on this machine;
+``cpu_s_per_view`` is reported too because the machine is shared and wall time moves with its load.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from typing import Any
+
+import numpy as np
+
+from services.registration.static import StaticConfig, StaticRegistrationError, register_view
+from services.registration.static.evaluate import prior_pose_errors, relative_pose_errors
+
+TARGET_S_PER_VIEW = 1.0
+PROFILE = "robot-turned"
+SUCCESS_MM, SUCCESS_DEG = 1.0, 0.2  # a view is registered when every scan is within these
+
+
+def _objects() -> list[str]:
+    from services.sim.catalogue import hope_names
+
+    return hope_names()
+
+
+def _views(name: str, n: int, seed: int):
+    from services.sim.scenario import simulated_views
+
+    return simulated_views(name, views=n, scans_per_view=3, profile=PROFILE, seed=seed)
+
+
+def _measure(frames, cfg: StaticConfig) -> dict[str, Any]:
+    t, c = time.perf_counter(), time.process_time()
+    try:
+        result = register_view(frames, cfg)
+    except StaticRegistrationError as exc:
+        return {"s": time.perf_counter() - t, "cpu_s": time.process_time() - c, "error": exc.code}
+    out = {"s": time.perf_counter() - t, "cpu_s": time.process_time() - c, "paths": [s.path for s in result.scans[1:]]}
+    errs = relative_pose_errors(result, frames)
+    out["trans_mm"] = max(e[0] for e in errs)
+    out["rot_deg"] = max(e[1] for e in errs)
+    return out
+
+
+def _summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    ok = [r for r in rows if "error" not in r]
+    trans = [r["trans_mm"] for r in ok]
+    rot = [r["rot_deg"] for r in ok]
+    good = [r for r in ok if r["trans_mm"] <= SUCCESS_MM and r["rot_deg"] <= SUCCESS_DEG]
+    return {
+        "s_per_view": round(float(np.mean([r["s"] for r in rows])), 4),
+        "cpu_s_per_view": round(float(np.mean([r["cpu_s"] for r in rows])), 4),
+        "max_trans_err_mm": round(max(trans), 4) if trans else None,
+        "max_rot_err_deg": round(max(rot), 5) if rot else None,
+        "median_trans_err_mm": round(float(np.median(trans)), 4) if trans else None,
+        "median_rot_err_deg": round(float(np.median(rot)), 5) if rot else None,
+        "views_within_1mm_0.2deg": f"{len(good)}/{len(rows)}",
+        "views_failed": len(rows) - len(ok),
+        "global_fallbacks": sum(p == "global" for r in ok for p in r.get("paths", [])),
+    }
+
+
+def run(quick: bool = False) -> dict[str, Any]:
+    """Measure both profiles on the same simulated views. ``quick``: 1 view per object (paper on 2 objects)."""
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    objects = _objects()
+    n_views = 1 if quick else 3
+    paper_objects = objects[:2] if quick else objects
+    rows: dict[str, list[dict[str, Any]]] = {"default": [], "paper": []}
+    prior_t, prior_r = [], []
+    per_object: dict[str, Any] = {}
+    for k, name in enumerate(objects):
+        views = _views(name, n_views, seed=10 + k)
+        for frames in views:
+            pe = prior_pose_errors(frames)
+            prior_t.append(max(e[0] for e in pe))
+            prior_r.append(max(e[1] for e in pe))
+            d = _measure(frames, StaticConfig())
+            rows["default"].append(d)
+            per_object.setdefault(name, {"default_max_trans_err_mm": 0.0, "paper_max_trans_err_mm": None})
+            per_object[name]["default_max_trans_err_mm"] = round(
+                max(per_object[name]["default_max_trans_err_mm"], d.get("trans_mm", np.inf)), 4
+            )
+            if name in paper_objects:
+                p = _measure(frames, StaticConfig.paper())
+                rows["paper"].append(p)
+                prev = per_object[name]["paper_max_trans_err_mm"] or 0.0
+                per_object[name]["paper_max_trans_err_mm"] = round(max(prev, p.get("trans_mm", np.inf)), 2)
+    default, paper = _summarise(rows["default"]), _summarise(rows["paper"])
+    return {
+        "default": default,
+        "paper": paper,
+        "speedup_default_vs_paper": round(paper["s_per_view"] / default["s_per_view"], 2),
+        "cpu_speedup_default_vs_paper": round(paper["cpu_s_per_view"] / default["cpu_s_per_view"], 2),
+        "prior": {
+            "max_trans_err_mm": round(max(prior_t), 4),
+            "max_rot_err_deg": round(max(prior_r), 5),
+            "note": "the arm's believed poses alone, no registration",
+        },
+        "target_s_per_view": TARGET_S_PER_VIEW,
+        "default_meets_target": default["s_per_view"] <= TARGET_S_PER_VIEW,
+        "default_meets_target_cpu": default["cpu_s_per_view"] <= TARGET_S_PER_VIEW,
+        "objects": per_object,
+        "views_per_object": n_views,
+        "error_profile": PROFILE,
+        "errors_relative_to": "scan 0",
+    }
+
+
+def main() -> None:
+    import sys
+
+    from bench.report import print_figures
+
+    print_figures("static", run(quick="--quick" in sys.argv))
+
+
+if __name__ == "__main__":
+    main()
