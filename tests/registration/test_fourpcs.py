@@ -16,6 +16,7 @@ from services.registration.dynamic.fourpcs import (
     default_max_bases,
     lcp_score,
     register_4pcs,
+    register_4pcs_overlaps,
 )
 from services.registration.dynamic.fourpcs_common import PointCloudInputError
 from services.registration.dynamic.global_registration import preprocess, refine_icp
@@ -182,3 +183,20 @@ def test_bad_parameters_raise_typed_errors():
         register_4pcs(P, P, delta=0.0)
     with pytest.raises(PointCloudInputError):
         register_4pcs(P, P, source_normals=np.ones((10, 3)), target_normals=np.ones((50, 3)))
+    with pytest.raises(PointCloudInputError):
+        register_4pcs_overlaps(P, P, overlaps=[])
+    with pytest.raises(PointCloudInputError):
+        register_4pcs_overlaps(P, P, overlaps=[0.9, 0.0])
+
+
+def test_overlaps_share_one_setup_and_report_each_run():
+    rng = np.random.default_rng(6)
+    target = np.vstack([rng.uniform([0, 0, 0], [0.12, 0.03, 0.02], size=(600, 3)),
+                        rng.uniform([0, 0.03, 0], [0.03, 0.08, 0.05], size=(300, 3))])
+    T = make_transform(Rotation.from_euler("xyz", [10, 70, -30], degrees=True).as_matrix(), [0.0, 0.1, 0.0])
+    runs = register_4pcs_overlaps(transform_points(invert(T), target), target, overlaps=(0.9, 0.85, 0.8),
+                                  delta=0.006, seed=2)
+    assert [r.overlap for r in runs] == [0.9, 0.85, 0.8]
+    best = max(runs, key=lambda r: r.score)
+    rms, rot = _errors(best.T, T, transform_points(invert(T), target))
+    assert rot < 3.0 and rms < 0.006
