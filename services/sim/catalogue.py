@@ -83,7 +83,7 @@ class SimObject:
     triangles: np.ndarray  # (T, 3) int32
     textures: list[np.ndarray] = field(default_factory=list)  # (H, W, 3) uint8 each
     triangle_uvs: np.ndarray | None = None  # (T, 3, 2) float32, OBJ convention (v = 0 at the image bottom)
-    triangle_material_ids: np.ndarray | None = None  # (T,) int32 index into textures
+    triangle_material_ids: np.ndarray | None = None  # (T,) int32 index into textures, -1 = untextured
     vertex_colors: np.ndarray | None = None  # (V, 3) float32 in [0, 1]
     source: Path | None = None
     scale: float = 1.0
@@ -104,7 +104,7 @@ class SimObject:
     @property
     def appearance(self) -> str:
         """"texture", "vertex_colors" or "untextured" (rendered in DEFAULT_COLOR)."""
-        if self.textures and self.triangle_uvs is not None:
+        if self.triangle_uvs is not None and self.textures:
             return "texture"
         if self.vertex_colors is not None:
             return "vertex_colors"
@@ -189,7 +189,7 @@ class SimObject:
             for m in np.unique(mats):
                 sel = mats == m
                 tex = self.textures[int(m)] if 0 <= m < len(self.textures) else None
-                out[sel] = DEFAULT_COLOR if tex is None else _bilinear(tex, uv[sel])
+                out[sel] = DEFAULT_COLOR if tex is None or tex.size == 0 else _bilinear(tex, uv[sel])
             return out
         if self.appearance == "vertex_colors":
             c = np.einsum("nk,nkj->nj", w, self.vertex_colors[self.triangles[tri]])
@@ -329,19 +329,28 @@ def _parse(name: str, path: Path, scale: float, up_axis: str) -> SimObject:
 
     # Open3D stores texture images bottom row first (so that row = v * H); keep them as the file has
     # them (top row first) and sample with row = (1 - v) * H, the OBJ convention.
-    o3d_textures = [t for t in mesh.textures if np.asarray(t).ndim == 3 and np.asarray(t).size > 0]
-    textures = [np.ascontiguousarray(np.asarray(t)[::-1, :, :3]).astype(np.uint8) for t in o3d_textures]
+    # Materials without a texture map show up as empty images; drop them and renumber the material ids
+    # (-1 = untextured triangle, drawn in DEFAULT_COLOR).
+    o3d_textures = list(mesh.textures)
+    valid = [np.asarray(t).ndim == 3 and np.asarray(t).size > 0 for t in o3d_textures]
+    textures = [np.ascontiguousarray(np.asarray(t)[::-1, :, :3]).astype(np.uint8)
+                for t, ok in zip(o3d_textures, valid, strict=True) if ok]
     uvs = None
     mats = None
     if mesh.has_triangle_uvs() and len(mesh.triangle_uvs) == 3 * F.shape[0] and textures:
         uvs = np.asarray(mesh.triangle_uvs, dtype=np.float32).reshape(-1, 3, 2)
         if not np.all(np.isfinite(uvs)):
             raise SimObjectError(f"{path} has NaN texture coordinates", code="bad_mesh", detail={"path": str(path)})
-        if mesh.has_triangle_material_ids():
-            mats = np.asarray(mesh.triangle_material_ids, dtype=np.int32).copy()
-            # Open3D numbers materials per file; with a single texture every triangle uses it
-            if len(textures) == 1:
-                mats[:] = 0
+        raw = (np.asarray(mesh.triangle_material_ids, dtype=np.int64) if mesh.has_triangle_material_ids()
+               else np.zeros(F.shape[0], dtype=np.int64))
+        renumber = np.cumsum(valid) - 1
+        ok = (raw >= 0) & (raw < len(valid))
+        mats = np.full(F.shape[0], -1, dtype=np.int32)
+        mats[ok] = np.where(np.asarray(valid)[raw[ok]], renumber[raw[ok]], -1)
+        if len(textures) == 1 and len(valid) == 1:
+            mats[:] = 0  # one material, one texture: whatever ids the loader wrote
+    else:
+        textures = []
     vcols = None
     if mesh.has_vertex_colors():
         vcols = np.clip(np.asarray(mesh.vertex_colors, dtype=np.float32), 0.0, 1.0)
@@ -349,9 +358,8 @@ def _parse(name: str, path: Path, scale: float, up_axis: str) -> SimObject:
     legacy = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F.astype(np.int32)))
     if uvs is not None:
         legacy.triangle_uvs = o3d.utility.Vector2dVector(uvs.reshape(-1, 2).astype(np.float64))
-        legacy.textures = [o3d.geometry.Image(np.ascontiguousarray(np.asarray(t)[..., :3])) for t in o3d_textures]
-        legacy.triangle_material_ids = o3d.utility.IntVector(
-            (mats if mats is not None else np.zeros(F.shape[0], dtype=np.int32)).tolist())
+        legacy.textures = [o3d.geometry.Image(np.ascontiguousarray(t[::-1])) for t in textures]
+        legacy.triangle_material_ids = o3d.utility.IntVector(mats.tolist())
     if vcols is not None:
         legacy.vertex_colors = o3d.utility.Vector3dVector(vcols.astype(np.float64))
     legacy.compute_vertex_normals()

@@ -349,7 +349,7 @@ def render(scene: RenderScene, T_base_camera: np.ndarray, intrinsics: Intrinsics
     obj = scene.obj
     mode, tri_uvs, tex, tris, vcols, albedo = 2, _EMPTY_UVS, _EMPTY_TEX, _EMPTY_TRIS, _EMPTY_VCOLS, _EMPTY_ALBEDO
     if obj is not None:
-        if obj.appearance == "texture" and len(obj.textures) == 1:
+        if obj.appearance == "texture" and len(obj.textures) == 1 and not obj.triangle_material_ids.any():
             mode, tri_uvs, tex = 0, obj.triangle_uvs, obj.textures[0]
         elif obj.appearance == "vertex_colors":
             mode, tris, vcols = 1, obj.triangles, obj.vertex_colors

@@ -175,3 +175,32 @@ def test_bad_arguments(tmp_path):
     (tmp_path / "notes.txt").write_text("hello")
     with pytest.raises(SimObjectError):
         load_object(str(tmp_path / "notes.txt"))
+
+
+def test_materials_without_texture_keep_their_triangles_untextured(tmp_path):
+    """Two materials, only the second textured: Open3D keeps an empty slot for the first, and the
+    material ids must still pick the right one (the first triangle is grey, the second textured)."""
+    from PIL import Image
+
+    from services.sim.catalogue import DEFAULT_COLOR
+    from services.sim.render import Lighting, RenderScene, render
+    from services.sim.sensor_model import d435_intrinsics
+
+    Image.fromarray(np.full((8, 8, 3), (10, 120, 250), np.uint8)).save(tmp_path / "blue.png")
+    (tmp_path / "two.mtl").write_text("newmtl plain\nKd 1 0 0\nnewmtl tex\nmap_Kd blue.png\n")
+    (tmp_path / "two.obj").write_text(
+        "mtllib two.mtl\nv 0 0 0\nv 0.1 0 0\nv 0.1 0.1 0\nv 0 0.1 0.05\n"
+        "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl plain\nf 1/1 2/2 3/3\nusemtl tex\nf 1/1 3/3 4/4\n")
+    obj = load_object(str(tmp_path / "two.obj"))
+    assert obj.appearance == "texture"
+    np.testing.assert_array_equal(obj.surface_colors(np.array([0, 1]), np.full((2, 2), 0.3)),
+                                  [DEFAULT_COLOR, (10, 120, 250)])
+    # the renderer takes the multi-material path and agrees
+    from common.geometry import make_transform
+
+    scene = RenderScene(obj, make_transform(translation=[0, 0, 0]), table=None,
+                        lighting=Lighting(ambient=1.0, diffuse=0.0))
+    T = make_transform(np.diag([1.0, -1.0, -1.0]), [0.0, 0.0, 0.5])  # looking straight down
+    res = render(scene, T, d435_intrinsics(320, 240), noise=None)
+    seen = {tuple(c) for c in res.color[res.labels == 2].reshape(-1, 3)}
+    assert tuple(DEFAULT_COLOR) in seen and (10, 120, 250) in seen
