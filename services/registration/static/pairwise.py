@@ -75,43 +75,38 @@ def global_ransac(
     return PairResult.of(result, max_corr)
 
 
+def _safe(run, init: np.ndarray, max_corr: float) -> PairResult:
+    """Run an Open3D ICP; when it finds no correspondence at all (Open3D raises), keep ``init``, fitness 0."""
+    try:
+        return PairResult.of(run(), max_corr)
+    except RuntimeError:
+        return PairResult(
+            T=np.asarray(init, dtype=np.float64).copy(), fitness=0.0, rmse=float("inf"), max_corr=max_corr
+        )
+
+
 def icp_point_to_plane(source, target, max_corr: float, init: np.ndarray, iterations: int = 30) -> PairResult:
-    result = reg.registration_icp(
-        source,
-        target,
-        max_corr,
+    crit = reg.ICPConvergenceCriteria(1e-7, 1e-7, iterations)
+    return _safe(
+        lambda: reg.registration_icp(source, target, max_corr, init, reg.TransformationEstimationPointToPlane(), crit),
         init,
-        reg.TransformationEstimationPointToPlane(),
-        reg.ICPConvergenceCriteria(1e-7, 1e-7, iterations),
+        max_corr,
     )
-    return PairResult.of(result, max_corr)
 
 
 def icp_colored(
     source, target, max_corr: float, init: np.ndarray, iterations: int = 30, lambda_geometric: float = 0.968
 ) -> PairResult:
     """Colored ICP (Park et al. 2017): photometric + geometric; needs colors on both and target normals."""
-    result = reg.registration_colored_icp(
-        source,
-        target,
-        max_corr,
-        init,
-        reg.TransformationEstimationForColoredICP(lambda_geometric),
-        reg.ICPConvergenceCriteria(1e-7, 1e-7, iterations),
-    )
-    return PairResult.of(result, max_corr)
+    crit = reg.ICPConvergenceCriteria(1e-7, 1e-7, iterations)
+    est = reg.TransformationEstimationForColoredICP(lambda_geometric)
+    return _safe(lambda: reg.registration_colored_icp(source, target, max_corr, init, est, crit), init, max_corr)
 
 
 def icp_generalized(source, target, max_corr: float, init: np.ndarray, iterations: int = 30) -> PairResult:
-    result = reg.registration_generalized_icp(
-        source,
-        target,
-        max_corr,
-        init,
-        reg.TransformationEstimationForGeneralizedICP(),
-        reg.ICPConvergenceCriteria(1e-7, 1e-7, iterations),
-    )
-    return PairResult.of(result, max_corr)
+    crit = reg.ICPConvergenceCriteria(1e-7, 1e-7, iterations)
+    est = reg.TransformationEstimationForGeneralizedICP()
+    return _safe(lambda: reg.registration_generalized_icp(source, target, max_corr, init, est, crit), init, max_corr)
 
 
 def mean_spacing(pcd: o3d.geometry.PointCloud) -> float:

@@ -7,10 +7,15 @@ fusion and the isolation, and differ in how the scans are aligned:
   again, then for voxel 5 mm and 2 mm colored ICP then GICP, then non-overlapping points are dropped and
   point-to-plane ICP runs at 1 mm. A pose graph of the scans gives the poses; scan 0's believed pose
   anchors the view in ``base``.
-- ``default``: clouds in ``base`` through the arm's believed poses (already right to a few mm), cropped
-  early to a region around where the first scan looks; per pair a coarse-to-fine ICP from those poses,
-  checked (fitness, RMSE, size of the correction); only a pair that fails the check runs FPFH RANSAC, and
-  the better-checked of the two wins. Same pose graph and anchor.
+- ``default``: the arm's believed poses are the prior (right to ~2 mm and ~0.2 degrees). The clouds are
+  cropped early to a region around where the first scan looks. Per pair: dense RGB-D odometry
+  (photometric + depth) from the prior at half resolution; the result is checked (fitness, inlier RMSE,
+  size of the correction); a pair that fails tries GICP from the prior, and only then global registration
+  (FPFH RANSAC on the table-free clouds, refined, scored on the table-free clouds). Pose graph with the
+  edges to scan 0 as the spanning tree and the others as prunable loop closures; same anchor.
+
+Both then fuse PC_global at ``output_voxel``, fit the table (RANSAC + least squares, normal toward the
+cameras), and keep the DBSCAN cluster that stands on the table nearest the first scan's centre pixel.
 """
 
 from __future__ import annotations
@@ -46,15 +51,11 @@ MIN_SCAN_POINTS = 500  # a scan with fewer valid depth points than this is treat
 
 @dataclass
 class Scan:
-    """One frame's points in its camera frame, with its believed pose and camera centre."""
+    """One frame's points in its camera frame (cropped to the ROI later), with its believed pose."""
 
     index: int
     pts_cam: FramePoints
     T_believed: np.ndarray
-
-    @property
-    def camera_centre(self) -> np.ndarray:
-        return self.T_believed[:3, 3]
 
 
 # ----------------------------------------------------------------------------------------------- inputs
