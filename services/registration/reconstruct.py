@@ -100,8 +100,30 @@ def run_dynamic_stage(
     report: dict[str, Any],
     progress: Progress | None = None,
 ) -> dict[str, Any] | None:
-    """Dynamic registration of the views into one model. Not wired yet: returns None."""
-    return None
+    """Dynamic registration of the views into one model: writes ``out_dir/model.ply``, returns its figures.
+
+    Views are taken in index order with their commanded cumulative turns; fewer than 3 usable views
+    (or a dynamic-stage error) is reported in the returned figures, not raised, like a failed view.
+    """
+    from services.registration.dynamic.model import DynamicConfig, build_model
+    from services.registration.dynamic.views import view_from_static
+
+    t0 = time.perf_counter()
+    order = sorted(results)
+    views = [view_from_static(results[k], session.commanded_turn_deg(k), index=k) for k in order]
+    say = (lambda stage, info: progress({"stage": f"dynamic:{stage}", **info})) if progress else None
+    try:
+        model = build_model(views, DynamicConfig(), progress=say)
+    except ObjscanError as exc:
+        return {"error": {"code": exc.code, "message": exc.message, "detail": exc.detail},
+                "views_used": order, "seconds": round(time.perf_counter() - t0, 4)}
+    ply = model.write_ply(Path(out_dir) / "model.ply")
+    figures = model.to_json()
+    figures.update({"ply": str(ply.relative_to(out_dir)), "views_used": order,
+                    "seconds": round(time.perf_counter() - t0, 4)})
+    report.setdefault("summary", {})["seconds_total"] = round(
+        float(report.get("summary", {}).get("total_s", 0.0)) + figures["seconds"], 3)
+    return figures
 
 
 def _ground_truth(result: ViewResult, frames: list) -> dict[str, Any] | None:
