@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import open3d as o3d
 import pytest
+from scipy.spatial.transform import Rotation
 
-from common.geometry import invert, transform_points
+from common.geometry import invert, make_transform, transform_points
 from services.registration.dynamic.fourpcs_common import PointCloudInputError
 from services.registration.dynamic.global_registration import (
     PAPER_OVERLAPS,
@@ -101,3 +102,23 @@ def test_bad_arguments_raise_typed_errors():
         global_register(pts, np.full((10, 3), np.nan))
     with pytest.raises(PointCloudInputError):
         global_register(pts[:2] * 0, pts)  # collapses to fewer than 4 points
+
+
+def test_prior_is_kept_when_geometry_cannot_tell_and_dropped_when_it_can():
+    rng = np.random.default_rng(3)
+    # a can: every turn about its axis fits equally well, so the prior (the true turn) must be kept
+    ang = rng.uniform(0, 2 * np.pi, 6000)
+    can = np.column_stack([0.035 * np.cos(ang), 0.035 * np.sin(ang), rng.uniform(0, 0.1, 6000)])
+    turn = make_transform(Rotation.from_euler("z", 25, degrees=True).as_matrix())
+    truth = invert(turn)
+    res = global_register(transform_points(turn, can), can, "4pcs", voxel=0.008, seed=0, prior_T=truth)
+    assert res.extra["kept_prior"] is True
+    np.testing.assert_allclose(res.T, truth)
+    # an L-shaped block with a prior 40 degrees off: the clearly better global fit wins
+    block = np.vstack([rng.uniform([0, 0, 0], [0.12, 0.03, 0.02], size=(2000, 3)),
+                       rng.uniform([0, 0.03, 0], [0.03, 0.08, 0.05], size=(1000, 3))])
+    bad_prior = make_transform(Rotation.from_euler("z", 40, degrees=True).as_matrix()) @ truth
+    res = global_register(transform_points(turn, block), block, "4pcs", voxel=0.008, seed=0, prior_T=bad_prior)
+    assert res.extra["kept_prior"] is False
+    rms, rot = _errors(res.T, truth, transform_points(turn, block))
+    assert rot < 3.0 and rms < 0.008

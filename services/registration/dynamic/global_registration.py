@@ -59,6 +59,7 @@ def global_register(source: np.ndarray | o3d.geometry.PointCloud, target: np.nda
                     method: str = "4pcs", *, voxel: float = 0.008,
                     overlap: float | Sequence[float] = PAPER_OVERLAPS, seed: int = 0,
                     source_normals: np.ndarray | None = None, target_normals: np.ndarray | None = None,
+                    prior_T: np.ndarray | None = None, prior_margin: float = 0.01,
                     config: GlobalRegistrationConfig | None = None) -> GlobalResult:
     """Global (initial-guess-free) ``T`` with ``target ~ T @ source``, by ``method`` at ``voxel`` metres.
 
@@ -66,6 +67,11 @@ def global_register(source: np.ndarray | o3d.geometry.PointCloud, target: np.nda
     LCP, as the paper does with 0.9, 0.85, 0.8 (unless ``config.fourpcs_skip_after_confirmed``, on by
     default, stops after a run whose pose was confirmed). The result's ``seconds`` include down-sampling,
     normals and features.
+
+    ``prior_T`` (e.g. the identity for views already pre-rotated by their commanded turn) is returned
+    instead of the method's answer when it scores within ``prior_margin`` of it (weighted LCP): when the
+    geometry cannot tell poses apart - a can turned about its axis - the prior is the better guess, while a
+    clearly better fit still wins. ``extra["kept_prior"]`` says which happened.
     """
     cfg = config or GlobalRegistrationConfig()
     if method not in METHODS:
@@ -96,9 +102,15 @@ def global_register(source: np.ndarray | o3d.geometry.PointCloud, target: np.nda
         T = _feature_based(src, tgt, method, voxel, seed, cfg)
         result = GlobalResult(T=T, lcp_score=0.0, n_bases_tried=0, seconds=0.0, method=method)
     lcp, weighted = score_alignment(np.asarray(src.points), np.asarray(tgt.points), result.T, voxel)
-    return replace(result, lcp_score=lcp, score=weighted, seconds=perf_counter() - t0,
+    T, kept_prior = result.T, False
+    if prior_T is not None:
+        prior = check_transform(prior_T, "prior_T")
+        prior_lcp, prior_weighted = score_alignment(np.asarray(src.points), np.asarray(tgt.points), prior, voxel)
+        if prior_weighted >= weighted - prior_margin:
+            T, lcp, weighted, kept_prior = prior, prior_lcp, prior_weighted, True
+    return replace(result, T=T, lcp_score=lcp, score=weighted, seconds=perf_counter() - t0,
                    extra={**result.extra, "n_source": len(src.points), "n_target": len(tgt.points),
-                          "voxel": voxel})
+                          "voxel": voxel, "kept_prior": kept_prior})
 
 
 def preprocess(cloud: np.ndarray | o3d.geometry.PointCloud, voxel: float, *, normals: np.ndarray | None = None,
