@@ -52,6 +52,15 @@ def _measure(frames, cfg: StaticConfig) -> dict[str, Any]:
     return out
 
 
+def _worst(entry: dict[str, Any], profile: str, row: dict[str, Any]) -> None:
+    """Per-object worst translation error (mm); a failed view is recorded by its error code."""
+    key = f"{profile}_max_trans_err_mm"
+    if "error" in row:
+        entry[f"{profile}_error"] = row["error"]
+        return
+    entry[key] = round(max(entry.get(key, 0.0), row["trans_mm"]), 4)
+
+
 def _summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     ok = [r for r in rows if "error" not in r]
     trans = [r["trans_mm"] for r in ok]
@@ -66,6 +75,7 @@ def _summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "median_rot_err_deg": round(float(np.median(rot)), 5) if rot else None,
         "views_within_1mm_0.2deg": f"{len(good)}/{len(rows)}",
         "views_failed": len(rows) - len(ok),
+        "failure_codes": sorted({r["error"] for r in rows if "error" in r}),
         "global_fallbacks": sum(p == "global" for r in ok for p in r.get("paths", [])),
     }
 
@@ -87,15 +97,12 @@ def run(quick: bool = False) -> dict[str, Any]:
             prior_r.append(max(e[1] for e in pe))
             d = _measure(frames, StaticConfig())
             rows["default"].append(d)
-            per_object.setdefault(name, {"default_max_trans_err_mm": 0.0, "paper_max_trans_err_mm": None})
-            per_object[name]["default_max_trans_err_mm"] = round(
-                max(per_object[name]["default_max_trans_err_mm"], d.get("trans_mm", np.inf)), 4
-            )
+            entry = per_object.setdefault(name, {})
+            _worst(entry, "default", d)
             if name in paper_objects:
                 p = _measure(frames, StaticConfig.paper())
                 rows["paper"].append(p)
-                prev = per_object[name]["paper_max_trans_err_mm"] or 0.0
-                per_object[name]["paper_max_trans_err_mm"] = round(max(prev, p.get("trans_mm", np.inf)), 2)
+                _worst(entry, "paper", p)
     default, paper = _summarise(rows["default"]), _summarise(rows["paper"])
     return {
         "default": default,
