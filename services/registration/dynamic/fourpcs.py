@@ -10,23 +10,27 @@ overlaps 0.9, 0.85 and 0.8. No Python package offers it, so this is our own impl
 2. Per trial, a *wide coplanar base* from the source: the largest-area triangle whose sides fit in
    ``overlap`` x the source diameter, plus a fourth point within ``delta`` of its plane such that the two
    segments (b0, b1) and (b2, b3) cross; their affine invariants r1, r2 follow.
-3. Congruent sets in the target: for pairs of length d1 (resp. d2) the points q_i + r1 (q_j - q_i)
-   (resp. r2) are computed, and the pairs whose points coincide within ``delta`` are matched with a KD-tree.
-   Super4PCS's angle filter keeps only matches whose segments make the base's angle; with normals, pairs
-   whose normal-to-normal and normal-to-segment angles differ from the base's are dropped before that
-   (the Super4PCS normal filter), which cuts the candidates by an order of magnitude.
+3. Congruent sets in the target (``fourpcs_kernels.match_congruent``, numba): for pairs of length d1
+   (resp. d2) the points q_i + r1 (q_j - q_i) (resp. r2) are bucketed in a delta grid and couples whose
+   points coincide within delta are tested in place: Super4PCS's angle filter (the segments make the
+   base's angle) and the four other base distances, so only rigidly congruent sets come out (at most
+   ``max_congruent_per_base``, a random subset). With normals, pairs whose normal-normal and
+   normal-segment angles differ from the base's are dropped first (the Super4PCS normal filter; the angles
+   are precomputed per pair in the index), which cuts the candidates by an order of magnitude.
 4. Each congruent set gives a rigid transform (batched Kabsch); sets that do not fit the base within
-   ``delta`` RMS are dropped. Verification is the Largest Common Pointset (LCP): the fraction of sampled
-   source points within ``delta`` of the target after the transform (KD-tree on the whole target). It is
-   staged: every candidate is scored on a small random subset first, and only the best few are scored on
-   the full sample - that early rejection is where most of the time is saved.
+   ``delta`` RMS are dropped. Verification is staged: every candidate is scored on a few dozen source
+   points through a distance-transform grid of the target (a table lookup), and only the best few on the
+   verify sample with a KD-tree over the whole target. Candidates are ranked by the weighted LCP,
+   mean(max(0, 1 - d^2 / delta^2)); the plain LCP (fraction within delta, Super4PCS's measure) is
+   reported too but saturates near 1 for many slightly different poses of a small object.
 5. Stop at ``max_time_s``, after ``max_bases`` bases (by default the count that makes a base drawn
    entirely from the overlap likely: log(0.01) / log(1 - overlap^4), x4 for sampling losses), as soon
    as the LCP reaches ``terminate_lcp``, or - our early exit - once ``stop_after_confirmations`` further
    bases have independently found the best pose again (within delta and 3 degrees): a wrong pose is
    rarely found twice from different bases, a right one is.
 
-Everything is vectorised numpy/scipy (cKDTree is C), so there is no JIT to warm up.
+The numba kernel is compiled once and cached on disk (``cache=True``); ``fourpcs_kernels.warm_up()`` pays
+that at service start instead of on the first registration.
 """
 
 from __future__ import annotations
