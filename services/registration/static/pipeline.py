@@ -269,7 +269,7 @@ def _register_default(
     with sw("register"):
         edges, outcomes = [], {}
         for j in range(1, len(scans)):
-            for i in range(j):
+            for i in range(j) if cfg.use_pose_graph else (0,):
                 prior = invert(scans[i].T_believed) @ scans[j].T_believed
                 out = _pair_default(data[j], data[i], prior, cfg, cfg.seed + 31 * j + i)
                 outcomes[(j, i)] = out
