@@ -48,6 +48,6 @@ def setup_logging(service: str, instance: str, level: str | None = None) -> None
     root.setLevel((level or os.environ.get("OBJSCAN_LOG_LEVEL", "INFO")).upper())
 
 
-def event(logger: logging.Logger, message: str, level: int = logging.INFO, **fields: object) -> None:
+def event(logger: logging.Logger, message: str, level: int = logging.INFO, /, **fields: object) -> None:
     """Log one event with structured fields: ``event(log, "capture done", ms=12.3, seq=4)``."""
     logger.log(level, message, extra={"fields": fields})

@@ -61,12 +61,20 @@ def ensure_cell(port: int, backend: str, log_dir: Path) -> ServiceGroup:
     """Join the cell on ``port``; start the router and whatever services are missing."""
     group = ServiceGroup(port, log_dir=log_dir, start_router=not _router_listening(port))
     if not _router_listening(port):
-        group.start_router()
+        try:
+            group.start_router()
+        except BaseException:
+            group.stop_all()
+            raise
     live = {s for s, _ in live_services(group.session, timeout=1.0)}
     needed = [s for s in SERVICE_MODULES if s not in live and not (s == "sim" and backend == "real")]
     if needed:
         console.print(f"starting services: {', '.join(needed)} (logs in {log_dir})")
-        group.launch(cell_specs(needed, backend=backend), timeout=180)
+        try:
+            group.launch(cell_specs(needed, backend=backend), timeout=180)
+        except BaseException:
+            group.stop_all()  # never leave half a cell behind
+            raise
     return group
 
 

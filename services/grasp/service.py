@@ -17,7 +17,15 @@ class GraspService(Service):
     name = "grasp"
 
     async def setup(self) -> None:
-        self.config = GraspPlannerConfig()
+        # Our TCP sits between the pads (services/arm/robot/NOTICE.md), so the paper's 0.05 m push past the
+        # contact midpoint would put the pads behind the object's equator and the fingertips inside its
+        # collision box at the pre-grasp; 0.01 m keeps the pads on the contacts (see docs/grasp.md).
+        # The antipodal filter on measured normals (not in GeoGrasp) is relaxed as GeoGrasp has it: from the
+        # front, a box turned by 30 degrees shows only one of the two faces a grasp closes on; the hidden
+        # one's extreme point is an edge whose normal is the visible face's, so a strict test leaves no grasp
+        # even though the pads close on both faces (the twin confirms it, docs/orchestrator.md).
+        self.config = GraspPlannerConfig(grasp_depth=float(self.settings.options.get("grasp_depth", 0.01)),
+                                         max_contact_angle_deg=89.0)
         self.plans = 0
         self.queryable(keys.GRASP_PLAN, self.plan)
 
@@ -36,5 +44,8 @@ class GraspService(Service):
 
 
 def main() -> None:
-    args = service_arg_parser("objscan grasp planning service").parse_args()
-    run_service(lambda: GraspService(settings_from_args(args)))
+    p = service_arg_parser("objscan grasp planning service")
+    p.add_argument("--grasp-depth", type=float, default=0.01,
+                   help="TCP push past the contact midpoint along the approach, m (paper: 0.05 for its frame)")
+    args = p.parse_args()
+    run_service(lambda: GraspService(settings_from_args(args, grasp_depth=args.grasp_depth)))

@@ -27,6 +27,7 @@ class TurnMotion:
     """The pick-turn-place sequence (paper II-B): lift, turn about the table normal, set down, retreat."""
 
     lift: float = 0.02  # m above the grasp before turning
+    clearance: float = 0.08  # m above the object's top for joint-space moves near it
     speed_scale: float = 0.6
     approach_speed_scale: float = 0.3
     gripper_force: float = 30.0
@@ -51,7 +52,7 @@ class AcquisitionConfig:
     max_rescans: int = 2  # re-scans per view before the session ends with a reason
     force_first_slip: bool = False  # sim: the first grasp slips (recovery test)
     evaluate: bool = True  # compare with ground truth when the cell knows it (sim)
-    workspace_center: tuple[float, float] = (0.50, 0.0)  # where the locate pose looks (and the twin puts the object)
+    workspace_center: tuple[float, float] = (0.60, 0.0)  # where the locate pose looks (and the twin puts the object)
     scan: ScanGeometry = field(default_factory=ScanGeometry)
     turn: TurnMotion = field(default_factory=TurnMotion)
 

@@ -319,7 +319,7 @@ class Acquisition:
         failures: list[str] = []
         attempts = 0
         for gi, grasp in enumerate(self._plan.grasps):
-            for seq in turn_sequences(grasp, cfg.turn):
+            for seq in turn_sequences(grasp, cfg.turn, view.height):
                 if attempts >= cfg.max_grasp_attempts:
                     break
                 attempts += 1
@@ -361,12 +361,14 @@ class Acquisition:
         opening = min(0.105, grasp.width + m.open_margin)
         await c.gripper(opening, m.gripper_force)
         await c.set_object_box(box_c, box_e)
-        await c.move("pose", target=seq.pregrasp, speed=m.speed_scale)
+        await c.move("pose", target=seq.above_pregrasp, speed=m.speed_scale)
+        await c.move("linear", target=seq.pregrasp, speed=m.approach_speed_scale)
         await c.move("linear", target=seq.grasp, speed=m.approach_speed_scale, contact=True)
         held = await c.gripper(0.0, m.gripper_force)
         if not held.holding:
             await c.gripper(opening, m.gripper_force)
             await c.move("linear", target=seq.pregrasp, speed=m.approach_speed_scale, contact=True)
+            await c.move("linear", target=seq.above_pregrasp, speed=m.approach_speed_scale)
             raise GraspFailed(held.reason or "nothing between the pads")
         await c.clear_object_box()
         try:
@@ -379,10 +381,12 @@ class Acquisition:
             finally:
                 await c.gripper(opening, m.gripper_force)
             await c.move("linear", target=seq.pregrasp, speed=m.approach_speed_scale, contact=True)
+            await c.move("linear", target=seq.above_pregrasp, speed=m.approach_speed_scale)
             raise
         await c.gripper(opening, m.gripper_force)
         await c.move("linear", target=seq.retreat, speed=m.approach_speed_scale, contact=True)
         await c.set_object_box(box_c, box_e)
+        await c.move("linear", target=seq.above_retreat, speed=m.approach_speed_scale)
 
     async def model(self) -> State:
         n = self.config.views

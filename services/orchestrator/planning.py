@@ -52,12 +52,14 @@ class TurnPoses:
     """The T_base_gripper waypoints of one pick-turn-place with a given angular offset of a grasp."""
 
     name: str
+    above_pregrasp: np.ndarray
     pregrasp: np.ndarray
     grasp: np.ndarray
     lifted: np.ndarray
     turned_lifted: np.ndarray
     turned: np.ndarray
     retreat: np.ndarray
+    above_retreat: np.ndarray
 
 
 def _lift(T: np.ndarray, dz: float) -> np.ndarray:
@@ -66,12 +68,15 @@ def _lift(T: np.ndarray, dz: float) -> np.ndarray:
     return out
 
 
-def turn_sequences(grasp: Grasp, motion: TurnMotion) -> list[TurnPoses]:
+def turn_sequences(grasp: Grasp, motion: TurnMotion, object_height: float) -> list[TurnPoses]:
     """For each angular offset of ``grasp`` (best first), its full pick-turn-place waypoints.
 
     The turn poses come from the planner (turn about the table normal through the object's centre); the
-    retreat backs off from the turned grasp as far as the pre-grasp was from the grasp.
+    retreat backs off from the turned grasp as far as the pre-grasp was from the grasp. Without a motion
+    planner, joint-space moves happen only high above the object (``above_*``: ``clearance`` over its
+    top); near the object the hand moves on straight lines.
     """
+    safe_z = object_height + motion.clearance
     poses = {name: p.matrix() for name, p in grasp.poses.items()}
     out = []
     for name in sorted((n for n in poses if n.startswith("grasp")), key=_offset_order):
@@ -83,8 +88,15 @@ def turn_sequences(grasp: Grasp, motion: TurnMotion) -> list[TurnPoses]:
         back = pre[:3, 3] - g[:3, 3]
         retreat = turn.copy()
         retreat[:3, 3] = turn[:3, 3] + turn[:3, :3] @ (g[:3, :3].T @ back)
-        out.append(TurnPoses(name=name, pregrasp=pre, grasp=g, lifted=_lift(g, motion.lift),
-                             turned_lifted=_lift(turn, motion.lift), turned=turn, retreat=retreat))
+        out.append(TurnPoses(name=name, above_pregrasp=_at_height(pre, safe_z), pregrasp=pre, grasp=g,
+                             lifted=_lift(g, motion.lift), turned_lifted=_lift(turn, motion.lift), turned=turn,
+                             retreat=retreat, above_retreat=_at_height(retreat, safe_z)))
+    return out
+
+
+def _at_height(T: np.ndarray, z: float) -> np.ndarray:
+    out = T.copy()
+    out[2, 3] = max(out[2, 3], z)
     return out
 
 

@@ -34,6 +34,7 @@ class SimService(Service):
         self.world = await self.run_cpu(World, opts.get("object", "milk"), profile=opts.get("profile", "ideal"),
                                         seed=int(opts.get("seed", 0)))
         self.seq = 0
+        self.last_joints: JointState | None = None
         self._world_lock = asyncio.Lock()
         r = self.robot
         self.queryable(keys.sim(r, "render"), self.render)
@@ -52,6 +53,7 @@ class SimService(Service):
             raise InvalidRequest("expected a JointState", detail={"got": type(msg).__name__})
         self.world.set_joint_state(msg.names, msg.position, T_base_gripper=msg.T_base_gripper,
                                    T_base_camera=msg.T_base_camera)
+        self.last_joints = msg
         return Ok()
 
     async def gripper(self, msg: Message | None, ctx: QueryContext) -> GripperResult:
@@ -82,10 +84,14 @@ class SimService(Service):
                 seed = int(params.get("seed", w.seed))
                 pose = None
                 if "x" in params or "y" in params or "yaw_deg" in params:
-                    pose = default_object_pose(float(params.get("x", 0.5)), float(params.get("y", 0.0)),
+                    pose = default_object_pose(float(params.get("x", 0.6)), float(params.get("y", 0.0)),
                                                float(params.get("yaw_deg", 0.0)))
                 self.world = await self.run_cpu(lambda: World(obj, profile=profile, seed=seed, object_pose=pose))
                 self.seq = 0
+                if self.last_joints is not None:  # the arm has not moved: the new world knows where it is
+                    j = self.last_joints
+                    self.world.set_joint_state(j.names, j.position, T_base_gripper=j.T_base_gripper,
+                                               T_base_camera=j.T_base_camera)
             return Ok(info=self.world.state())
         if op == "force_slip":
             self.world.force_next_grasp_slip()
