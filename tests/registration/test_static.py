@@ -195,6 +195,14 @@ def test_empty_frame_list_and_bad_pose_are_bad_frames():
     with pytest.raises(BadFramesError) as exc:
         register_view(frames)
     assert isinstance(exc.value, StaticRegistrationError) and exc.value.code == "bad_frames"
+    frames, _, _ = labelled_view("milk", profile="ideal")
+    small = frames[2]
+    small.color, small.depth = small.color[::2, ::2].copy(), small.depth[::2, ::2].copy()
+    small.intrinsics = d435_intrinsics(320, 240)
+    with pytest.raises(BadFramesError):
+        register_view(frames)
+    with pytest.raises(BadFramesError):
+        register_view(["not a frame"])
 
 
 def test_table_without_object_is_no_object():

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import open3d as o3d
-from scipy.spatial import cKDTree
+from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from common.messages import Plane
 
@@ -126,10 +126,8 @@ def footprint_centre(points: np.ndarray, table: Plane) -> tuple[np.ndarray, floa
     foot = points - np.outer(h, n)  # projected onto the plane
     uv = np.column_stack([foot @ a, foot @ b])
     try:
-        from scipy.spatial import ConvexHull
-
         hull = uv[ConvexHull(uv).vertices]
-    except Exception:  # degenerate (collinear) footprint
+    except (QhullError, ValueError):  # degenerate (collinear or too few points) footprint
         hull = uv
     best = None
     for i in range(len(hull)):

@@ -82,6 +82,12 @@ def _load_scans(frames: list[RGBDFrame], cfg: StaticConfig) -> list[Scan]:
                 },
             )
         scans.append(Scan(index=i, pts_cam=pts, T_believed=np.asarray(f.T_base_camera, dtype=np.float64)))
+    sizes = {np.asarray(f.depth).shape for f in frames}
+    if len(sizes) > 1:
+        raise BadFramesError(
+            "the scans of one view must come from one camera (image sizes differ)",
+            detail={"sizes": sorted(list(s) for s in sizes)},
+        )
     return scans
 
 
