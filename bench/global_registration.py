@@ -167,6 +167,7 @@ def _summary(rows: list[dict]) -> dict:
     return {
         "n_cases": len(rows),
         "success_rate": float(np.mean([r["success"] for r in rows])),
+        "raw_success_rate": float(np.mean([r["rotation_error_raw_deg"] < SUCCESS_DEG for r in rows])),
         "time_median_s": float(np.median([r["seconds_global"] for r in rows])),
         "time_max_s": float(np.max([r["seconds_global"] for r in rows])),
         "rotation_error_raw_median_deg": float(np.median([r["rotation_error_raw_deg"] for r in rows])),
