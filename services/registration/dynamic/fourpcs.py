@@ -72,7 +72,7 @@ class FourPCSConfig:
 
 
 def register_4pcs(source_xyz: np.ndarray, target_xyz: np.ndarray, *, overlap: float = 0.8,
-                  delta: float = 0.008, max_time_s: float = 2.0, seed: int = 0, sample_size: int = 300,
+                  delta: float = 0.008, max_time_s: float = 2.0, seed: int = 0, sample_size: int = 200,
                   source_normals: np.ndarray | None = None, target_normals: np.ndarray | None = None,
                   max_bases: int | None = None, terminate_lcp: float | None = None,
                   config: FourPCSConfig | None = None) -> GlobalResult:
@@ -92,7 +92,7 @@ def register_4pcs(source_xyz: np.ndarray, target_xyz: np.ndarray, *, overlap: fl
 
 def register_4pcs_overlaps(source_xyz: np.ndarray, target_xyz: np.ndarray, *,
                            overlaps: Sequence[float] = (0.9, 0.85, 0.8), delta: float = 0.008,
-                           max_time_s: float = 2.0, seed: int = 0, sample_size: int = 300,
+                           max_time_s: float = 2.0, seed: int = 0, sample_size: int = 200,
                            source_normals: np.ndarray | None = None, target_normals: np.ndarray | None = None,
                            max_bases: int | None = None, terminate_lcp: float | None = None,
                            skip_after_confirmed: bool = False,

@@ -49,7 +49,7 @@ class GlobalRegistrationConfig:
     ransac_confidence: float = 0.999
     fgr_distance_factor: float = 0.5
     fourpcs_max_time_s: float = 2.0
-    fourpcs_sample_size: int = 300
+    fourpcs_sample_size: int = 200
     # the paper runs all three overlaps; skipping the rest once a run's pose is confirmed is our speed-up
     fourpcs_skip_after_confirmed: bool = True
     fourpcs: FourPCSConfig = FourPCSConfig()
