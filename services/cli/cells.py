@@ -29,7 +29,7 @@ def cell_specs(services: list[str] | None = None, *, backend: str = "sim",
     specs = []
     for name in names:
         args = list((extra_args or {}).get(name, []))
-        if name in ("camera", "arm"):
+        if name == "camera" or (name == "arm" and backend != "realsense"):
             args = ["--backend", backend, *args]
         specs.append(ProcessSpec(SERVICE_MODULES[name], args, service=name))
     return specs

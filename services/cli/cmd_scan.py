@@ -57,8 +57,9 @@ def _router_listening(port: int) -> bool:
         return s.connect_ex(("127.0.0.1", port)) == 0
 
 
-def ensure_cell(port: int, backend: str, log_dir: Path) -> ServiceGroup:
-    """Join the cell on ``port``; start the router and whatever services are missing."""
+def ensure_cell(port: int, backend: str, log_dir: Path, services: list[str] | None = None,
+                extra_args: dict[str, list[str]] | None = None) -> ServiceGroup:
+    """Join the cell on ``port``; start the router and whatever of ``services`` (default: all) is missing."""
     group = ServiceGroup(port, log_dir=log_dir, start_router=not _router_listening(port))
     if not _router_listening(port):
         try:
@@ -67,11 +68,12 @@ def ensure_cell(port: int, backend: str, log_dir: Path) -> ServiceGroup:
             group.stop_all()
             raise
     live = {s for s, _ in live_services(group.session, timeout=1.0)}
-    needed = [s for s in SERVICE_MODULES if s not in live and not (s == "sim" and backend == "real")]
+    wanted = services or list(SERVICE_MODULES)
+    needed = [s for s in wanted if s not in live and not (s == "sim" and backend != "sim")]
     if needed:
         console.print(f"starting services: {', '.join(needed)} (logs in {log_dir})")
         try:
-            group.launch(cell_specs(needed, backend=backend), timeout=180)
+            group.launch(cell_specs(needed, backend=backend, extra_args=extra_args), timeout=180)
         except BaseException:
             group.stop_all()  # never leave half a cell behind
             raise

@@ -16,6 +16,8 @@ COMMANDS = [
     "services.cli.cmd_call",
     "services.cli.cmd_bench",
     "services.cli.cmd_scan",
+    "services.cli.cmd_capture",
+    "services.cli.cmd_reconstruct",
 ]
 
 

@@ -2,10 +2,17 @@
 
 It knows keys and message types, nothing about the acquisition's logic; the state machine talks only to
 this, so the same machine drives the simulated cell, the real one or a replay.
+
+Every call is idempotent (a move to a pose, a capture, a registration of given frames), so when a service
+is gone — killed, restarting, its machine rebooting — the call waits for it to come back (up to
+``retry_window_s``) and is sent again. ``tap`` sees every request and reply (the session recorder).
 """
 
 from __future__ import annotations
 
+import asyncio
+import logging
+import time
 from collections.abc import Awaitable, Callable
 from typing import Any
 
@@ -27,10 +34,14 @@ from common.api import (
     ViewResult,
 )
 from common.codec import Message
-from common.errors import RemoteError
+from common.errors import RemoteError, ServiceUnavailable
+from common.log import event
 from common.messages import Ok, Plane, PointCloud, Request, RGBDFrame
 
+log = logging.getLogger("objscan.orchestrator")
+
 Requester = Callable[..., Awaitable[Message]]
+Tap = Callable[[str, Message | None, Message, float, float], None]
 
 MOVE_TIMEOUT_S = 120.0
 COMPUTE_TIMEOUT_S = 600.0
@@ -45,9 +56,37 @@ def _expect(reply: Message, cls: type) -> Any:
 class Cell:
     """Async calls to the services of one robot cell (``robot``) and the shared compute services."""
 
-    def __init__(self, request: Requester, robot: str):
-        self._request = request
+    def __init__(self, request: Requester, robot: str, *, retry_window_s: float = 120.0, tap: Tap | None = None):
+        self._send = request
         self.robot = robot
+        self.retry_window_s = retry_window_s
+        self.tap = tap
+        self.retries = 0
+
+    async def _request(self, key: str, msg: Message | None = None, *, timeout: float) -> Message:
+        """Send, and re-send while the service is unavailable (it may be restarting)."""
+        deadline = time.monotonic() + self.retry_window_s
+        delay = 0.5
+        while True:
+            t0 = time.time()
+            try:
+                reply = await self._send(key, msg, timeout=timeout)
+            except ServiceUnavailable as exc:  # includes timeouts: the service died mid-request
+                if time.monotonic() > deadline or key.endswith("/sim/world"):
+                    raise
+                self.retries += 1
+                event(log, "service unavailable; retrying", logging.WARNING, key=key, code=exc.code)
+                await asyncio.sleep(delay)
+                delay = min(delay * 2, 5.0)
+                continue
+            except RemoteError as exc:
+                if exc.code != "shutdown" or time.monotonic() > deadline:
+                    raise
+                await asyncio.sleep(delay)
+                continue
+            if self.tap is not None:
+                self.tap(key, msg, reply, t0, time.time())
+            return reply
 
     async def move(self, kind: str, *, target: np.ndarray | None = None, q: np.ndarray | None = None,
                    frame: str = "gripper", speed: float = 0.5, free_roll: bool = False,

@@ -31,7 +31,7 @@ class TurnMotion:
     speed_scale: float = 0.6
     approach_speed_scale: float = 0.3
     gripper_force: float = 30.0
-    open_margin: float = 0.02  # opening beyond the grasp width before approaching
+    open_margin: float = 0.04  # opening beyond the planned width (partial views underestimate it)
     object_box_margin: float = 0.01
 
 

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from common.api import GraspPlanReply, ViewResult
+from common.api import GraspPlanReply, MoveResult, ViewResult
 from common.errors import ObjscanError, RemoteError
 from common.log import event
 from common.messages import Grasp
@@ -99,6 +99,7 @@ class Acquisition:
             self.config = AcquisitionConfig.from_dict(self.j["config"])
             self.decide("resumed", state=self.j["state"], view=self.j["view"])
         self._plan: GraspPlanReply | None = None
+        self._step = ""
 
     # -------------------------------------------------------------------------------- bookkeeping
     @property
@@ -254,7 +255,7 @@ class Acquisition:
         for j, T in enumerate(poses):
             if self.store.has_scan(k, j):
                 continue  # captured before a restart: never capture twice
-            moved = await self.cell.move("pose", target=T, frame="camera", speed=0.6)
+            moved = await self._transit(T, "camera", 0.6)
             frame = await self.cell.capture(self.config.width, self.config.height)
             self.j["counters"]["captures"] += 1
             self.store.save_scan(k, j, frame, {"joints": {"position": moved.q.tolist()}, "view": k, "scan": j,
@@ -318,23 +319,28 @@ class Acquisition:
         box_c, box_e = object_box(view.center, view.height, view.cloud.xyz, cfg.turn.object_box_margin)
         failures: list[str] = []
         attempts = 0
+        failed_before = set(self.j.setdefault("failed_grasps", {}).get(str(k), []))
         for gi, grasp in enumerate(self._plan.grasps):
             for seq in turn_sequences(grasp, cfg.turn, view.height):
+                signature = f"{grasp.kind}:{gi}:{seq.name}"
                 if attempts >= cfg.max_grasp_attempts:
                     break
+                if signature in failed_before:  # it slipped before: after a re-scan, try another one first
+                    continue
                 attempts += 1
                 self.j["counters"]["grasp_attempts"] += 1
                 try:
                     await self._execute_turn(grasp, seq, box_c, box_e)
                 except GraspFailed as exc:
                     self.j["counters"]["slips"] += 1
+                    self.j["failed_grasps"].setdefault(str(k), []).append(signature)
                     self.decide("grasp failed", grasp=gi, pose=seq.name, reason=exc.message)
                     self._plan = None
                     self.j["grasp_mode"] = "auto"
                     return await self._rescan(k, f"grasp failed: {exc.message}")
                 except RemoteError as exc:
                     failures.append(f"{seq.name}:{exc.code}")
-                    self.decide("grasp pose not executable", grasp=gi, pose=seq.name, code=exc.code,
+                    self.decide("grasp pose not executable", grasp=gi, pose=seq.name, step=self._step, code=exc.code,
                                 message=exc.message[:200])
                     continue
                 self.decide("turned", grasp=gi, pose=seq.name, kind=grasp.kind)
@@ -351,6 +357,28 @@ class Acquisition:
         self.j["grasp_mode"] = "auto"
         return await self._rescan(k, "no executable grasp")
 
+    async def _transit(self, target: np.ndarray, frame: str, speed: float) -> MoveResult:
+        """Move to ``target`` without a motion planner, safest route first.
+
+        1. a straight line (nothing swings down towards the table or the object on the way);
+        2. a jerk-limited joint motion (checked sample by sample against table, object box and envelope);
+        3. via the home posture (high, camera up): a joint path from there rarely dips.
+        Each is fully checked by the arm before it runs; the last failure is raised.
+        """
+        try:
+            return await self.cell.move("linear", target=target, frame=frame, speed=speed)
+        except RemoteError as exc:
+            if exc.code in ("estop_latched", "busy"):
+                raise
+        try:
+            return await self.cell.move("pose", target=target, frame=frame, speed=speed)
+        except RemoteError as exc:
+            if exc.code in ("estop_latched", "busy", "unreachable", "joint_limits"):
+                raise
+            self.decide("transit via home", code=exc.code)
+        await self.cell.move("home", speed=speed)
+        return await self.cell.move("pose", target=target, frame=frame, speed=speed)
+
     async def _execute_turn(self, grasp: Grasp, seq: TurnPoses, box_c: np.ndarray, box_e: np.ndarray) -> None:
         """Pick, lift, turn about the table normal, set down, release, retreat. Raises on failure.
 
@@ -359,11 +387,16 @@ class Acquisition:
         """
         c, m = self.cell, self.config.turn
         opening = min(0.105, grasp.width + m.open_margin)
+        self._step = "open"
         await c.gripper(opening, m.gripper_force)
         await c.set_object_box(box_c, box_e)
-        await c.move("pose", target=seq.above_pregrasp, speed=m.speed_scale)
+        self._step = "to above pre-grasp"
+        await self._transit(seq.above_pregrasp, "gripper", m.speed_scale)
+        self._step = "down to pre-grasp"
         await c.move("linear", target=seq.pregrasp, speed=m.approach_speed_scale)
+        self._step = "approach"
         await c.move("linear", target=seq.grasp, speed=m.approach_speed_scale, contact=True)
+        self._step = "close"
         held = await c.gripper(0.0, m.gripper_force)
         if not held.holding:
             await c.gripper(opening, m.gripper_force)
@@ -372,6 +405,7 @@ class Acquisition:
             raise GraspFailed(held.reason or "nothing between the pads")
         await c.clear_object_box()
         try:
+            self._step = "lift, turn, set down"
             await c.move("linear", target=seq.lifted, speed=m.approach_speed_scale, contact=True)
             await c.move("pose", target=seq.turned_lifted, speed=m.approach_speed_scale, contact=True)
             await c.move("linear", target=seq.turned, speed=m.approach_speed_scale, contact=True)
