@@ -22,6 +22,7 @@ from services.orchestrator.cell import Cell
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.machine import Acquisition
 from services.orchestrator.store import SessionStore
+from services.recording.hook import describe_run, run_recorded, start_recording
 
 
 class OrchestratorService(Service):
@@ -61,8 +62,12 @@ class OrchestratorService(Service):
                 raise InvalidRequest(f"{path} already holds a session; use resume or another folder")
             store = SessionStore(path)
             config = AcquisitionConfig.from_dict(params.get("config", {}))
-        self.current = Acquisition(self.cell, store, config, on_status=self._publish)
-        self.task = self.spawn(self.current.run())
+        # session recording (docs/recording.md): on unless the run says ``record: false``
+        recorder = start_recording(path, self.session, self.robot) if params.get("record", True) else None
+        cell = Cell(recorder.wrap(self.request) if recorder else self.request, self.robot)
+        self.current = Acquisition(cell, store, config, on_status=self._publish)
+        describe_run(recorder, self.current)
+        self.task = self.spawn(run_recorded(self.current, recorder))
         return Ok(info={"session": str(path.resolve()), "resumed": self.current.resumed})
 
     async def status(self, msg: Message | None, ctx: QueryContext) -> Ok:
