@@ -1,0 +1,101 @@
+"""``objscan replay``: run a recorded session again and check the model comes out the same.
+
+- ``objscan replay SESSION_DIR_OR_MCAP --out DIR``: the full replay (``services/recording/replay.py``):
+  registration, grasp and orchestrator live, camera and arm answering from the recording, no sim;
+  a new session folder in DIR with ``DIR/model.ply``.
+- ``objscan replay SESSION_DIR_OR_MCAP --out DIR --only registration``: just the registration (static per
+  view, then dynamic) on the recorded frames, in-process (``services/recording/registration.py``);
+  ``--static-profile`` / ``--dynamic-config`` try another method on the same scans.
+
+Both print the comparison with the recorded model and exit 0 when the replay finished and its model is
+identical or within ``--tolerance-mm`` (1 when it differs, 2 when the replay itself failed). Details in
+``DIR/replay.json``; docs/recording.md explains what is compared.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+from common.errors import ObjscanError
+
+
+def register(sub) -> None:  # noqa: ANN001 - argparse sub-parsers
+    p = sub.add_parser("replay", help="replay a recorded session (full, or registration only) and compare models",
+                       description="Replay a recorded session against the services, or re-run only its "
+                                   "registration, writing a new session folder with its model.")
+    add_arguments(p)
+    p.set_defaults(func=run)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("source", metavar="SESSION_DIR_OR_MCAP", help="a recorded session folder or its session.mcap")
+    p.add_argument("--out", required=True, help="new session folder for the replay")
+    p.add_argument("--only", choices=["registration"], help="re-run only this stage, in-process")
+    p.add_argument("--static-profile", help="registration only: static profile (default: the recorded one)")
+    p.add_argument("--dynamic-config", help="registration only: dynamic config as JSON (default: the recorded one)")
+    p.add_argument("--tolerance-mm", type=float, default=0.5,
+                   help="largest model difference (Hausdorff, mm) still counted as the same (default: %(default)s)")
+    p.add_argument("--atol", type=float, default=1e-4,
+                   help="full replay: largest difference between a live and a recorded camera/arm request "
+                        "(m, rad) (default: %(default)s)")
+    p.add_argument("--timeout", type=float, default=1800.0, help="full replay: give up after this many seconds")
+
+
+def _print_comparison(report: dict[str, Any]) -> int:
+    cmp_ = report.get("comparison")
+    if not cmp_:
+        print("no recorded model to compare with" if report.get("model") else "the replay produced no model")
+        return 0 if report.get("model") else 2
+    if cmp_["identical"]:
+        print(f"model identical to the recording ({cmp_['points_replayed']} points, byte for byte)")
+        return 0
+    print(f"model differs from the recording: chamfer {cmp_['chamfer_mm']} mm, hausdorff {cmp_['hausdorff_mm']} mm, "
+          f"points {cmp_['points_recorded']} -> {cmp_['points_replayed']} "
+          f"({'within' if cmp_['within_tolerance'] else 'beyond'} {cmp_['tolerance_mm']} mm)")
+    return 0 if cmp_["within_tolerance"] else 1
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        if args.only == "registration":
+            from services.recording.registration import replay_registration
+
+            dyn = json.loads(args.dynamic_config) if args.dynamic_config else None
+            report = replay_registration(args.source, args.out, static_profile=args.static_profile,
+                                         dynamic_config=dyn, tolerance_mm=args.tolerance_mm, progress=print)
+        else:
+            from services.recording.replay import replay_session
+
+            def show(status: dict[str, Any]) -> None:
+                print(f"\rview {status.get('view')}: {status.get('state'):<12} "
+                      f"({status.get('views_done', 0)}/{status.get('views')} views)", end="", flush=True)
+
+            report = replay_session(args.source, args.out, atol=args.atol, tolerance_mm=args.tolerance_mm,
+                                    timeout_s=args.timeout, progress=show)
+            print()
+            status = report.get("status", {})
+            if status.get("status") != "done":
+                print(f"replay {status.get('status')}: {json.dumps(status.get('last_error'))}")
+                div = (report.get("arm") or {}).get("diverged") or (report.get("camera") or {}).get("diverged")
+                if div:
+                    print(f"diverged from the recording: {json.dumps(div)}")
+                print(f"details: {args.out}/replay.json")
+                return 2
+    except ObjscanError as exc:
+        print(f"replay failed: {exc}", file=sys.stderr)
+        return 2
+    print(f"model: {report.get('model')}")
+    return _print_comparison(report)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="objscan replay")
+    add_arguments(p)
+    return run(p.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
