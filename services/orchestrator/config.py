@@ -48,7 +48,7 @@ class AcquisitionConfig:
     height: int = 480
     static_profile: str = "default"
     dynamic_config: dict = field(default_factory=dict)
-    max_grasp_attempts: int = 6  # executions tried per turn before re-scanning
+    max_grasp_attempts: int = 16  # executions tried per turn before re-scanning (unreachable ones are cheap)
     max_rescans: int = 2  # re-scans per view before the session ends with a reason
     force_first_slip: bool = False  # sim: the first grasp slips (recovery test)
     evaluate: bool = True  # compare with ground truth when the cell knows it (sim)

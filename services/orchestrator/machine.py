@@ -21,7 +21,7 @@ import logging
 import shutil
 import time
 from collections.abc import Callable
-from enum import Enum
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -33,7 +33,15 @@ from common.messages import Grasp
 from common.session_folder import view_dir
 from services.orchestrator.cell import Cell
 from services.orchestrator.config import AcquisitionConfig
-from services.orchestrator.planning import TurnPoses, look_pose, object_box, scan_pose_candidates, turn_sequences
+from services.orchestrator.planning import (
+    TurnPoses,
+    look_pose,
+    object_box,
+    radial_misalignment_deg,
+    scan_pose_candidates,
+    turn_arc,
+    turn_sequences,
+)
 from services.orchestrator.store import SessionStore
 
 log = logging.getLogger("objscan.orchestrator")
@@ -41,7 +49,7 @@ log = logging.getLogger("objscan.orchestrator")
 SCANS_PER_VIEW = 3
 
 
-class State(str, Enum):
+class State(StrEnum):
     LOCATE = "locate"
     SCAN = "scan"
     REGISTER = "register"
@@ -320,7 +328,10 @@ class Acquisition:
         failures: list[str] = []
         attempts = 0
         failed_before = set(self.j.setdefault("failed_grasps", {}).get(str(k), []))
-        for gi, grasp in enumerate(self._plan.grasps):
+        order = sorted(range(len(self._plan.grasps)),  # reachable-looking first, then by rank (stable)
+                       key=lambda i: radial_misalignment_deg(self._plan.grasps[i], view.center) > 50.0)
+        for gi in order:
+            grasp = self._plan.grasps[gi]
             for seq in turn_sequences(grasp, cfg.turn, view.height):
                 signature = f"{grasp.kind}:{gi}:{seq.name}"
                 if attempts >= cfg.max_grasp_attempts:
@@ -330,7 +341,7 @@ class Acquisition:
                 attempts += 1
                 self.j["counters"]["grasp_attempts"] += 1
                 try:
-                    await self._execute_turn(grasp, seq, box_c, box_e)
+                    await self._execute_turn(grasp, seq, box_c, box_e, view.center)
                 except GraspFailed as exc:
                     self.j["counters"]["slips"] += 1
                     self.j["failed_grasps"].setdefault(str(k), []).append(signature)
@@ -343,8 +354,8 @@ class Acquisition:
                     self.decide("grasp pose not executable", grasp=gi, pose=seq.name, step=self._step, code=exc.code,
                                 message=exc.message[:200])
                     continue
-                self.decide("turned", grasp=gi, pose=seq.name, kind=grasp.kind)
-                self.j["turns_deg"].append(self.j["turns_deg"][k] + cfg.turn_deg)
+                self.decide("turned", grasp=gi, pose=seq.name, kind=grasp.kind, direction=seq.direction)
+                self.j["turns_deg"].append(self.j["turns_deg"][k] + seq.direction * cfg.turn_deg)
                 self.j["view"] = k + 1
                 self.j["grasp_mode"] = "auto"
                 self._plan = None
@@ -379,7 +390,8 @@ class Acquisition:
         await self.cell.move("home", speed=speed)
         return await self.cell.move("pose", target=target, frame=frame, speed=speed)
 
-    async def _execute_turn(self, grasp: Grasp, seq: TurnPoses, box_c: np.ndarray, box_e: np.ndarray) -> None:
+    async def _execute_turn(self, grasp: Grasp, seq: TurnPoses, box_c: np.ndarray, box_e: np.ndarray,
+                            center: np.ndarray) -> None:
         """Pick, lift, turn about the table normal, set down, release, retreat. Raises on failure.
 
         Motions before the gripper closes may fail harmlessly (RemoteError: the caller tries the next pose);
@@ -407,7 +419,8 @@ class Acquisition:
         try:
             self._step = "lift, turn, set down"
             await c.move("linear", target=seq.lifted, speed=m.approach_speed_scale, contact=True)
-            await c.move("pose", target=seq.turned_lifted, speed=m.approach_speed_scale, contact=True)
+            for waypoint in turn_arc(seq.lifted, seq.turned_lifted, center):
+                await c.move("linear", target=waypoint, speed=m.approach_speed_scale, contact=True)
             await c.move("linear", target=seq.turned, speed=m.approach_speed_scale, contact=True)
         except RemoteError:
             try:  # put it back where it stood, then let the caller try another pose

@@ -60,6 +60,7 @@ class TurnPoses:
     turned: np.ndarray
     retreat: np.ndarray
     above_retreat: np.ndarray
+    direction: int = 1  # +1: the planner's turn (counter-clockwise seen from above); -1: the mirror turn
 
 
 def _lift(T: np.ndarray, dz: float) -> np.ndarray:
@@ -69,7 +70,8 @@ def _lift(T: np.ndarray, dz: float) -> np.ndarray:
 
 
 def turn_sequences(grasp: Grasp, motion: TurnMotion, object_height: float) -> list[TurnPoses]:
-    """For each angular offset of ``grasp`` (best first), its full pick-turn-place waypoints.
+    """For each angular offset of ``grasp`` (best first), its full pick-turn-place waypoints; then the same
+    with the turn mirrored (-30°), for when the arm cannot follow the planner's direction.
 
     The turn poses come from the planner (turn about the table normal through the object's centre); the
     retreat backs off from the turned grasp as far as the pre-grasp was from the grasp. Without a motion
@@ -79,19 +81,56 @@ def turn_sequences(grasp: Grasp, motion: TurnMotion, object_height: float) -> li
     safe_z = object_height + motion.clearance
     poses = {name: p.matrix() for name, p in grasp.poses.items()}
     out = []
-    for name in sorted((n for n in poses if n.startswith("grasp")), key=_offset_order):
-        suffix = name[len("grasp"):]
-        pre, turn = poses.get("pregrasp" + suffix), poses.get("turn" + suffix)
-        if pre is None or turn is None:
-            continue
-        g = poses[name]
-        back = pre[:3, 3] - g[:3, 3]
-        retreat = turn.copy()
-        retreat[:3, 3] = turn[:3, 3] + turn[:3, :3] @ (g[:3, :3].T @ back)
-        out.append(TurnPoses(name=name, above_pregrasp=_at_height(pre, safe_z), pregrasp=pre, grasp=g,
-                             lifted=_lift(g, motion.lift), turned_lifted=_lift(turn, motion.lift), turned=turn,
-                             retreat=retreat, above_retreat=_at_height(retreat, safe_z)))
+    for direction in (1, -1):
+        for name in sorted((n for n in poses if n.startswith("grasp")), key=_offset_order):
+            suffix = name[len("grasp"):]
+            pre, turn = poses.get("pregrasp" + suffix), poses.get("turn" + suffix)
+            if pre is None or turn is None:
+                continue
+            g = poses[name]
+            if direction < 0:  # the same turn about the same line, the other way round
+                turn = np.linalg.inv(turn @ np.linalg.inv(g)) @ g
+            back = pre[:3, 3] - g[:3, 3]
+            retreat = turn.copy()
+            retreat[:3, 3] = turn[:3, 3] + turn[:3, :3] @ (g[:3, :3].T @ back)
+            out.append(TurnPoses(name=name if direction > 0 else f"{name}_reverse",
+                                 above_pregrasp=_at_height(pre, safe_z), pregrasp=pre, grasp=g,
+                                 lifted=_lift(g, motion.lift), turned_lifted=_lift(turn, motion.lift),
+                                 turned=turn, retreat=retreat, above_retreat=_at_height(retreat, safe_z),
+                                 direction=direction))
     return out
+
+
+def turn_arc(start: np.ndarray, end: np.ndarray, center: np.ndarray, axis: np.ndarray = (0.0, 0.0, 1.0),
+             step_deg: float = 5.0) -> list[np.ndarray]:
+    """Waypoints from ``start`` to ``end`` turning about the line through ``center`` along ``axis``.
+
+    A turn held in the hand must follow the arc: one joint-space motion between its ends can swing the
+    hand far off it (measured: down to the table). Consecutive waypoints ``step_deg`` apart are joined by
+    straight lines whose chord deviates from the arc by under 0.1 mm at 10 cm radius.
+    """
+    from common.geometry import rotation_about_line, yaw_deg_about
+
+    rel = end @ np.linalg.inv(start)
+    total = yaw_deg_about(axis, rel[:3, :3])
+    n = max(1, int(np.ceil(abs(total) / step_deg)))
+    c = np.array([center[0], center[1], 0.0])
+    points = [rotation_about_line(axis, c, np.radians(total * i / n)) @ start for i in range(1, n)]
+    return [*points, end]
+
+
+def radial_misalignment_deg(grasp: Grasp, center: np.ndarray) -> float:
+    """Angle between a grasp's approach (gripper x, horizontal part) and the line from the arm's base to the
+    object: the arm reaches far-away low poses only roughly radially, so side approaches are tried last."""
+    if "grasp" not in grasp.poses:
+        return 180.0
+    T = grasp.poses["grasp"].matrix()
+    radial = np.array([center[0], center[1], 0.0])
+    approach = np.array([T[0, 0], T[1, 0], 0.0])
+    if np.linalg.norm(approach) < 1e-6:  # top-down: straight down is neutral
+        return 0.0
+    cos = float(radial @ approach / (np.linalg.norm(radial) * np.linalg.norm(approach) + 1e-12))
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
 
 
 def _at_height(T: np.ndarray, z: float) -> np.ndarray:

@@ -87,7 +87,8 @@ class SessionStore:
         meta = json.loads((d / "view.json").read_text())
         cloud: PointCloud = read_ply(d / "object.ply")
         t = meta["table"]
-        table = Plane(normal=np.asarray(t["normal"], float), offset=float(t["offset"]), center=np.asarray(t["center"], float))
+        table = Plane(normal=np.asarray(t["normal"], float), offset=float(t["offset"]),
+                      center=np.asarray(t["center"], float))
         return ViewResult(view=int(meta["view"]), cloud=cloud, table=table, center=np.asarray(meta["center"], float),
                           height=float(meta["height"]), scan_poses=np.asarray(meta["scan_poses"], float),
                           figures=meta.get("figures", {}))
