@@ -13,6 +13,12 @@ Environment variables (all optional):
 | ``OBJSCAN_ZENOH_LISTEN`` | comma-separated endpoints to listen on | none (peers listen on ``tcp/127.0.0.1:0``) |
 | ``OBJSCAN_ZENOH_MULTICAST`` | ``1`` to enable multicast scouting | ``0`` |
 | ``OBJSCAN_ZENOH_CONNECT_TIMEOUT_MS`` | how long a client waits for its router at start (-1: forever) | ``10000`` |
+| ``OBJSCAN_ZENOH_TLS_CA`` | CA certificate (PEM) that signed the router's and every service's certificate | none |
+| ``OBJSCAN_ZENOH_TLS_CERT`` | this process's certificate (PEM); its CN is the identity the router's ACL sees | none |
+| ``OBJSCAN_ZENOH_TLS_KEY`` | this process's private key (PEM) | none |
+
+TLS: with ``OBJSCAN_ZENOH_TLS_CA`` set, ``tls/...`` endpoints verify the router against that CA; with the
+certificate and key set too, the process authenticates itself (mutual TLS). See docs/security.md.
 
 Why clients by default: in Zenoh 1.x peers route only over direct links (``peer_to_peer``), so a peer that
 has not yet linked to every other peer misses some of them; clients send everything through the router,
@@ -48,6 +54,7 @@ class ZenohSettings:
     multicast_scouting: bool = False
     config_file: str | None = None
     connect_timeout_ms: int = 10000
+    tls: TlsSettings | None = None
 
     @classmethod
     def from_env(cls, env: dict[str, str] | None = None) -> ZenohSettings:
@@ -65,6 +72,7 @@ class ZenohSettings:
             s.config_file = env["OBJSCAN_ZENOH_CONFIG"]
         if env.get("OBJSCAN_ZENOH_CONNECT_TIMEOUT_MS"):
             s.connect_timeout_ms = int(env["OBJSCAN_ZENOH_CONNECT_TIMEOUT_MS"])
+        s.tls = TlsSettings.from_env(env)
         return s
 
     def with_overrides(self, *, mode: str | None = None, connect: list[str] | None = None,
@@ -90,6 +98,8 @@ class ZenohSettings:
             env["OBJSCAN_ZENOH_LISTEN"] = ",".join(self.listen)
         if self.config_file:
             env["OBJSCAN_ZENOH_CONFIG"] = self.config_file
+        if self.tls is not None:
+            env.update(self.tls.to_env())
         return env
 
     def to_zenoh(self) -> zenoh.Config:
@@ -109,7 +119,50 @@ class ZenohSettings:
         listen = self.listen or (["tcp/127.0.0.1:0"] if self.mode == "peer" and not self.config_file else [])
         if listen:
             conf.insert_json5("listen/endpoints", json.dumps(listen))
+        if self.tls is not None:
+            self.tls.apply(conf)
         return conf
+
+
+# ------------------------------------------------------------------------------------------------- TLS
+@dataclass
+class TlsSettings:
+    """Mutual TLS for ``tls/...`` endpoints (written for issue 10; see docs/security.md).
+
+    ``ca`` alone: the process checks the router's certificate but shows none itself (a router with
+    ``enable_mtls`` refuses it). ``ca`` + ``cert`` + ``key``: mutual authentication; the certificate's
+    CN is the identity the router's access-control policy grants rights to.
+    """
+
+    ca: str
+    cert: str | None = None
+    key: str | None = None
+
+    @classmethod
+    def from_env(cls, env: dict[str, str]) -> TlsSettings | None:
+        ca = env.get("OBJSCAN_ZENOH_TLS_CA")
+        if not ca:
+            return None
+        cert, key = env.get("OBJSCAN_ZENOH_TLS_CERT") or None, env.get("OBJSCAN_ZENOH_TLS_KEY") or None
+        if (cert is None) != (key is None):
+            raise ValueError("OBJSCAN_ZENOH_TLS_CERT and OBJSCAN_ZENOH_TLS_KEY must be set together")
+        return cls(ca=ca, cert=cert, key=key)
+
+    def to_env(self) -> dict[str, str]:
+        env = {"OBJSCAN_ZENOH_TLS_CA": self.ca}
+        if self.cert and self.key:
+            env.update(OBJSCAN_ZENOH_TLS_CERT=self.cert, OBJSCAN_ZENOH_TLS_KEY=self.key)
+        return env
+
+    def apply(self, conf: zenoh.Config) -> None:
+        """Set ``transport/link/tls`` (files must exist: a typo fails here, not as a silent plain link)."""
+        for path in (self.ca, self.cert, self.key):
+            if path is not None and not Path(path).is_file():
+                raise FileNotFoundError(f"TLS file {path} does not exist")
+        tls: dict[str, object] = {"root_ca_certificate": self.ca}
+        if self.cert and self.key:
+            tls.update(connect_certificate=self.cert, connect_private_key=self.key, enable_mtls=True)
+        conf.insert_json5("transport/link/tls", json.dumps(tls))
 
 
 def free_tcp_port() -> int:

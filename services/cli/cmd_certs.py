@@ -27,8 +27,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-IDENTITIES = ("orchestrator", "camera", "arm", "sim", "registration", "grasp", "viewer")
-"""The service identities of one cell; the CN of each certificate, matched by the router's ACL."""
+IDENTITIES = ("orchestrator", "camera", "arm", "sim", "registration", "grasp", "viewer", "operator")
+"""The identities of one cell (services, a read-only viewer, a person's CLI); each certificate's CN."""
 
 ROUTER_NAMES = ("zenoh-router", "localhost", "127.0.0.1", "::1")
 """Names the router is reached by (compose service name, loopback); clients verify one of them."""
