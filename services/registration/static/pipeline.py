@@ -279,10 +279,9 @@ def _register_default(
                 prior = invert(scans[i].T_believed) @ scans[j].T_believed
                 out = _pair_default(data[j], data[i], prior, cfg, cfg.seed + 31 * j + i)
                 outcomes[(j, i)] = out
-                info = pw.information(
-                    data[j]["check"], data[i]["check"], cfg.check_voxel * cfg.check_corr_factor, out.T
-                )
-                edges.append((j, i, out.T, info))
+                if cfg.use_pose_graph:
+                    corr = cfg.check_voxel * cfg.check_corr_factor
+                    edges.append((j, i, out.T, pw.information(data[j]["check"], data[i]["check"], corr, out.T)))
     with sw("pose_graph"):
         initial = [np.eye(4)] + [outcomes[(j, 0)].T for j in range(1, len(scans))]
         poses = _optimise(len(scans), edges, initial, cfg)
