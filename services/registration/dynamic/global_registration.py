@@ -59,7 +59,7 @@ def global_register(source: np.ndarray | o3d.geometry.PointCloud, target: np.nda
                     method: str = "4pcs", *, voxel: float = 0.008,
                     overlap: float | Sequence[float] = PAPER_OVERLAPS, seed: int = 0,
                     source_normals: np.ndarray | None = None, target_normals: np.ndarray | None = None,
-                    prior_T: np.ndarray | None = None, prior_margin: float = 0.01,
+                    prior_T: np.ndarray | None = None, prior_margin: float = 0.03,
                     config: GlobalRegistrationConfig | None = None) -> GlobalResult:
     """Global (initial-guess-free) ``T`` with ``target ~ T @ source``, by ``method`` at ``voxel`` metres.
 
@@ -69,9 +69,10 @@ def global_register(source: np.ndarray | o3d.geometry.PointCloud, target: np.nda
     normals and features.
 
     ``prior_T`` (e.g. the identity for views already pre-rotated by their commanded turn) is returned
-    instead of the method's answer when it scores within ``prior_margin`` of it (weighted LCP): when the
-    geometry cannot tell poses apart - a can turned about its axis - the prior is the better guess, while a
-    clearly better fit still wins. ``extra["kept_prior"]`` says which happened.
+    instead of the method's answer when a short point-to-plane ICP from it reaches a weighted LCP within
+    ``prior_margin`` of the method's: when the geometry cannot tell poses apart - a can turned about its
+    axis - the prior is the better guess, while a clearly better fit still wins. The returned ``T`` is then
+    the prior itself (its scores are those of the nearby optimum), and ``extra["kept_prior"]`` is True.
     """
     cfg = config or GlobalRegistrationConfig()
     if method not in METHODS:
@@ -105,7 +106,11 @@ def global_register(source: np.ndarray | o3d.geometry.PointCloud, target: np.nda
     T, kept_prior = result.T, False
     if prior_T is not None:
         prior = check_transform(prior_T, "prior_T")
-        prior_lcp, prior_weighted = score_alignment(np.asarray(src.points), np.asarray(tgt.points), prior, voxel)
+        # a prior is as good as its nearest local optimum: score it after a short ICP at this voxel, but
+        # return the prior itself - on a can that ICP slides freely about the axis and loses the turn
+        nearby = np.array(reg.registration_icp(src, tgt, 2.0 * voxel, prior, reg.TransformationEstimationPointToPlane(),
+                                               reg.ICPConvergenceCriteria(max_iteration=30)).transformation)
+        prior_lcp, prior_weighted = score_alignment(np.asarray(src.points), np.asarray(tgt.points), nearby, voxel)
         if prior_weighted >= weighted - prior_margin:
             T, lcp, weighted, kept_prior = prior, prior_lcp, prior_weighted, True
     return replace(result, T=T, lcp_score=lcp, score=weighted, seconds=perf_counter() - t0,
