@@ -1,0 +1,17 @@
+"""The model library: acquired models as files indexed in SQLite, searchable by a partial view.
+
+- ``ModelLibrary(root)``: ``add``, ``list``, ``get``, ``export``, ``delete``, ``find`` (store.py; crash rule there)
+- ``add_session_model(library_root, session_dir)``: what the orchestrator calls at the end of a run
+- ``find`` ranks models for a partial view: GOOD shortlist, then registration fitness (matching.py)
+
+See docs/library.md.
+"""
+
+from services.library.errors import BadModelInput, LibraryError, ModelNotFound
+from services.library.matching import FindConfig, Match
+from services.library.metadata import ModelMetadata
+from services.library.session import add_session_model, session_metadata
+from services.library.store import ModelEntry, ModelLibrary, ReconcileReport
+
+__all__ = ["BadModelInput", "FindConfig", "LibraryError", "Match", "ModelEntry", "ModelLibrary", "ModelMetadata",
+           "ModelNotFound", "ReconcileReport", "add_session_model", "session_metadata"]

@@ -1,0 +1,517 @@
+"""The model library: models as files, indexed in SQLite, consistent across crashes.
+
+Layout under ``root``::
+
+    index.sqlite                 one row per model (id, object, date, session, configuration, metadata JSON)
+    .lock                        fcntl lock: one writer (or reconciler) at a time, across processes
+    entries/<id>/model.ply       the model point cloud (binary PLY, colors and normals when known)
+    entries/<id>/mesh.ply        optional surface mesh
+    entries/<id>/descriptors.npz GOOD of the whole model and of its synthetic partial views (for ``find``)
+    entries/<id>/metadata.json   written last: id, metadata, and the size + SHA-256 of every other file
+    .staging/<id>.<pid>/         an ``add`` in progress
+    .trash/<id>.<pid>/           a ``delete`` in progress
+
+Crash safety (the rule, tested in tests/library/test_crash_safety.py):
+
+- ``add`` writes every file into ``.staging``, fsyncs them and the folder, renames the folder into
+  ``entries/`` (atomic on POSIX: the *commit point* of an add), fsyncs ``entries/``, and only then inserts
+  the index row in a transaction.
+- ``delete`` renames the entry into ``.trash`` (its commit point), deletes the row, then removes the files.
+- On open the library *reconciles* (under the lock, so never against a live writer): it removes everything
+  in ``.staging`` and ``.trash``; drops index rows whose entry folder or model file is missing; and for
+  every entry folder without a row, indexes it if it is complete (``metadata.json`` parses, names this id,
+  and every file it lists is there with the recorded size and SHA-256) or removes it if not.
+
+So a crash before the rename leaves nothing (the add never happened); a crash after it leaves an entry that
+the next open indexes (the add happened; only the index lagged); there is never an orphan folder nor a row
+without its files. An exception (rather than a kill) inside ``add`` rolls back at once.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import hashlib
+import json
+import logging
+import os
+import secrets
+import shutil
+import sqlite3
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import open3d as o3d
+
+from common.messages import PointCloud
+from services.library.descriptors import DescriptorConfig, check_xyz, model_descriptors
+from services.library.errors import BadModelInput, LibraryError, ModelNotFound
+from services.library.metadata import ModelMetadata, slug
+
+log = logging.getLogger("objscan.library")
+
+INDEX = "index.sqlite"
+ENTRIES = "entries"
+STAGING = ".staging"
+TRASH = ".trash"
+LOCK = ".lock"
+MODEL_FILE = "model.ply"
+MESH_FILE = "mesh.ply"
+DESCRIPTORS_FILE = "descriptors.npz"
+METADATA_FILE = "metadata.json"
+SCHEMA_VERSION = 1
+
+#: Points where a test (or a curious operator) can stop an ``add`` or ``delete``; see ``fault_hook``.
+ADD_STAGES = ("staging_created", "files_written", "metadata_written", "renamed", "row_inserted", "committed")
+DELETE_STAGES = ("trashed", "row_deleted", "committed")
+
+ModelInput = str | Path | PointCloud | o3d.geometry.PointCloud | np.ndarray
+
+
+@dataclass
+class ModelEntry:
+    """One stored model as the index knows it; paths point into the library (read-only for callers)."""
+
+    id: str
+    metadata: ModelMetadata
+    path: Path
+    points: int
+
+    @property
+    def model_path(self) -> Path:
+        return self.path / MODEL_FILE
+
+    @property
+    def mesh_path(self) -> Path | None:
+        p = self.path / MESH_FILE
+        return p if p.is_file() else None
+
+    def summary(self) -> dict[str, Any]:
+        """The short JSON-able form ``models list`` prints."""
+        q = self.metadata.quality
+        return {"id": self.id, "object": self.metadata.object_name,
+                "created": time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(self.metadata.created)),
+                "points": self.points, "configuration": self.metadata.configuration,
+                "chamfer_mm": q.get("chamfer_mm"), "session": self.metadata.session,
+                "mesh": self.mesh_path is not None}
+
+
+@dataclass
+class ReconcileReport:
+    """What opening the library repaired (all empty on a clean library)."""
+
+    removed_staging: list[str] = field(default_factory=list)
+    removed_trash: list[str] = field(default_factory=list)
+    dropped_rows: list[str] = field(default_factory=list)
+    indexed: list[str] = field(default_factory=list)
+    removed_incomplete: list[str] = field(default_factory=list)
+
+    def changed(self) -> bool:
+        return any((self.removed_staging, self.removed_trash, self.dropped_rows, self.indexed,
+                    self.removed_incomplete))
+
+
+class ModelLibrary:
+    """A folder of models with a SQLite index; see the module doc for the layout and the crash rule.
+
+    ``fault_hook`` (tests only) is called with each stage name of ``ADD_STAGES`` / ``DELETE_STAGES`` as an
+    add or delete passes it; raising there, or killing the process there, simulates a crash at that point.
+    """
+
+    def __init__(self, root: str | Path, *, descriptor_config: DescriptorConfig | None = None,
+                 fault_hook: Callable[[str], None] | None = None):
+        self.root = Path(root)
+        self.descriptor_config = descriptor_config or DescriptorConfig()
+        self.fault_hook = fault_hook
+        try:
+            for sub in (ENTRIES, STAGING, TRASH):
+                (self.root / sub).mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise LibraryError(f"cannot create library folder {self.root}: {exc}") from None
+        with self._locked():
+            self._init_schema()
+            self.last_reconcile = self._reconcile()
+        if self.last_reconcile.changed():
+            log.warning("library %s repaired on open: %s", self.root, self.last_reconcile)
+
+    # ------------------------------------------------------------------------------------------ public
+    def add(self, model_ply: ModelInput, metadata: ModelMetadata | dict[str, Any], *,
+            mesh: str | Path | o3d.geometry.TriangleMesh | None = None) -> str:
+        """Store a model (a PLY path, a wire ``PointCloud``, an Open3D cloud or an (N, 3) array); returns its id.
+
+        The GOOD descriptors are computed here (whole model + synthetic views) and the whole-model one is
+        copied into ``metadata.descriptor``. Raises ``BadModelInput`` for an empty, NaN or unreadable model.
+        """
+        meta = metadata if isinstance(metadata, ModelMetadata) else ModelMetadata.from_dict(dict(metadata))
+        meta.validate()
+        pcd = _load_cloud(model_ply)
+        mesh_obj = _load_mesh(mesh) if mesh is not None else None
+        desc = model_descriptors(np.asarray(pcd.points), self.descriptor_config)
+        meta.descriptor = {"kind": "GOOD", "n_bins": desc["n_bins"], "whole": desc["whole"].round(8).tolist(),
+                           "synthetic_views": int(desc["views"].shape[0])}
+        entry_id = f"{slug(meta.object_name)}-{time.strftime('%Y%m%d-%H%M%S', time.localtime(meta.created))}-" \
+                   f"{secrets.token_hex(3)}"
+        with self._locked():
+            stage = self.root / STAGING / f"{entry_id}.{os.getpid()}"
+            final = self.root / ENTRIES / entry_id
+            try:
+                stage.mkdir()
+                self._fault("staging_created")
+                files = {MODEL_FILE: _write_cloud(stage / MODEL_FILE, pcd),
+                         DESCRIPTORS_FILE: _write_npz(stage / DESCRIPTORS_FILE, desc)}
+                if mesh_obj is not None:
+                    files[MESH_FILE] = _write_mesh(stage / MESH_FILE, mesh_obj)
+                self._fault("files_written")
+                record = {"id": entry_id, "points": len(pcd.points), "files": files, "metadata": meta.to_dict()}
+                _write_synced(stage / METADATA_FILE, json.dumps(record, indent=2, default=_json_default).encode())
+                _fsync_dir(stage)
+                self._fault("metadata_written")
+                os.rename(stage, final)
+                _fsync_dir(final.parent)
+                _fsync_dir(stage.parent)
+            except BaseException:
+                shutil.rmtree(stage, ignore_errors=True)
+                raise
+            try:
+                self._fault("renamed")
+                with self._transaction() as db:
+                    db.execute("INSERT INTO models VALUES (?, ?, ?, ?, ?, ?, ?, ?)", _row(record))
+                    self._fault("row_inserted")
+                self._fault("committed")
+            except BaseException:
+                # roll back a committed-on-disk entry the caller never got an id for; the row (if the
+                # failure came after commit) goes too, so either both exist or neither does
+                self._remove_entry(entry_id, hooks=False)
+                raise
+        return entry_id
+
+    def list(self, object_name: str | None = None) -> list[ModelEntry]:
+        """Every stored model (oldest first), optionally only those of one object name."""
+        sql = "SELECT id, metadata, points FROM models"
+        args: tuple = ()
+        if object_name is not None:
+            sql += " WHERE object_name = ?"
+            args = (object_name,)
+        with self._connect() as db:
+            rows = db.execute(sql + " ORDER BY created, id", args).fetchall()
+        return [self._entry(*r) for r in rows]
+
+    def get(self, entry_id: str) -> ModelEntry:
+        """The entry of ``entry_id`` (a unique prefix is enough); ``ModelNotFound`` otherwise."""
+        return self._entry(*self._row_for(entry_id))
+
+    def export(self, entry_id: str, dest: str | Path) -> list[Path]:
+        """Copy a model out of the library; returns the files written.
+
+        ``dest`` ending in ``.ply``: the model PLY is written there and its metadata beside it
+        (``<stem>.json``). Otherwise ``dest`` is a folder that receives ``model.ply``, ``metadata.json``
+        and ``mesh.ply`` when there is one. Each copy goes through a temporary name (no half files).
+        """
+        entry = self.get(entry_id)
+        dest = Path(dest)
+        pairs: list[tuple[Path, Path]]
+        if dest.suffix.lower() == ".ply":
+            pairs = [(entry.model_path, dest), (entry.path / METADATA_FILE, dest.with_suffix(".json"))]
+            if entry.mesh_path is not None:
+                pairs.append((entry.mesh_path, dest.with_name(f"{dest.stem}_mesh.ply")))
+        else:
+            pairs = [(entry.path / name, dest / name) for name in (MODEL_FILE, METADATA_FILE, MESH_FILE)
+                     if (entry.path / name).is_file()]
+        out = []
+        for src, dst in pairs:
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            tmp = dst.with_name(f".{dst.name}.{os.getpid()}.tmp")
+            try:
+                shutil.copyfile(src, tmp)
+                os.replace(tmp, dst)
+            except OSError as exc:
+                Path(tmp).unlink(missing_ok=True)
+                raise LibraryError(f"cannot export to {dst}: {exc}", code="io_error") from None
+            out.append(dst)
+        return out
+
+    def delete(self, entry_id: str) -> str:
+        """Remove a model (files and row); returns the full id deleted."""
+        with self._locked():
+            full = self._row_for(entry_id)[0]
+            try:
+                self._remove_entry(full)
+            except BaseException:
+                # past the trash rename the delete has happened: finish it so files and index agree now
+                self._reconcile()
+                raise
+        return full
+
+    def find(self, cloud_xyz: np.ndarray | PointCloud | str | Path, top_k: int = 3, *,
+             rgb: np.ndarray | None = None, config: Any = None) -> list:
+        """Best-matching stored models for a (partial) view, best first: ``[Match(id, score, detail)]``.
+
+        See ``services.library.matching.find`` for how (GOOD shortlist, then registration fitness).
+        """
+        from services.library.matching import find
+
+        return find(self, cloud_xyz, top_k, rgb=rgb, config=config)
+
+    def descriptors(self, entry_id: str) -> dict[str, np.ndarray]:
+        """The stored GOOD descriptors of a model: ``whole`` (D,) and ``views`` (V, D)."""
+        entry = self.get(entry_id)
+        try:
+            with np.load(entry.path / DESCRIPTORS_FILE) as z:
+                return {k: z[k] for k in z.files}
+        except (OSError, ValueError) as exc:
+            raise LibraryError(f"descriptors of {entry.id} are unreadable: {exc}") from None
+
+    def load_cloud(self, entry_id: str) -> o3d.geometry.PointCloud:
+        """The stored model as an Open3D cloud (colors and normals when it has them)."""
+        return o3d.io.read_point_cloud(str(self.get(entry_id).model_path))
+
+    def __len__(self) -> int:
+        with self._connect() as db:
+            return int(db.execute("SELECT COUNT(*) FROM models").fetchone()[0])
+
+    # ------------------------------------------------------------------------------------------ internals
+    def _fault(self, stage: str) -> None:
+        if self.fault_hook is not None:
+            self.fault_hook(stage)
+
+    def _entry(self, entry_id: str, metadata_json: str, points: int) -> ModelEntry:
+        return ModelEntry(id=entry_id, metadata=ModelMetadata.from_dict(json.loads(metadata_json)),
+                          path=self.root / ENTRIES / entry_id, points=int(points))
+
+    def _row_for(self, entry_id: str) -> tuple[str, str, int]:
+        if not isinstance(entry_id, str) or not entry_id:
+            raise ModelNotFound("a model id is needed", detail={"id": entry_id})
+        with self._connect() as db:
+            rows = db.execute("SELECT id, metadata, points FROM models WHERE id = ?", (entry_id,)).fetchall()
+            if not rows:
+                pattern = entry_id.replace("\\", "\\\\").replace("%", "\\%").replace("_", "\\_") + "%"
+                rows = db.execute("SELECT id, metadata, points FROM models WHERE id LIKE ? ESCAPE '\\'",
+                                  (pattern,)).fetchall()
+        if not rows:
+            raise ModelNotFound(f"no model {entry_id!r} in {self.root}", detail={"id": entry_id})
+        if len(rows) > 1:
+            raise ModelNotFound(f"{entry_id!r} is ambiguous", code="ambiguous_id",
+                                detail={"id": entry_id, "matches": sorted(r[0] for r in rows)[:10]})
+        return rows[0]
+
+    def _remove_entry(self, entry_id: str, *, hooks: bool = True) -> None:
+        """Trash the folder (commit point), delete the row, then the files; the caller holds the lock."""
+        fault = self._fault if hooks else (lambda _stage: None)
+        src = self.root / ENTRIES / entry_id
+        trash = self.root / TRASH / f"{entry_id}.{os.getpid()}"
+        if src.exists():
+            os.rename(src, trash)
+            _fsync_dir(src.parent)
+        fault("trashed")
+        with self._transaction() as db:
+            db.execute("DELETE FROM models WHERE id = ?", (entry_id,))
+            fault("row_deleted")
+        fault("committed")
+        shutil.rmtree(trash, ignore_errors=True)
+
+    @contextlib.contextmanager
+    def _locked(self) -> Iterator[None]:
+        try:
+            fh = open(self.root / LOCK, "a+")  # noqa: SIM115 - held for the with-block
+        except OSError as exc:
+            raise LibraryError(f"cannot open the library lock in {self.root}: {exc}") from None
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
+            yield
+        finally:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+            fh.close()
+
+    @contextlib.contextmanager
+    def _connect(self) -> Iterator[sqlite3.Connection]:
+        try:
+            db = sqlite3.connect(self.root / INDEX, timeout=30.0, isolation_level=None)
+        except sqlite3.Error as exc:
+            raise LibraryError(f"cannot open the index of {self.root}: {exc}") from None
+        try:
+            db.execute("PRAGMA synchronous = FULL")
+            yield db
+        except sqlite3.DatabaseError as exc:
+            raise LibraryError(f"index of {self.root} is unusable: {exc}") from None
+        finally:
+            db.close()
+
+    @contextlib.contextmanager
+    def _transaction(self) -> Iterator[sqlite3.Connection]:
+        with self._connect() as db:
+            db.execute("BEGIN IMMEDIATE")
+            try:
+                yield db
+            except BaseException:
+                db.execute("ROLLBACK")
+                raise
+            db.execute("COMMIT")
+
+    def _init_schema(self) -> None:
+        with self._connect() as db:
+            version = int(db.execute("PRAGMA user_version").fetchone()[0])
+            if version > SCHEMA_VERSION:
+                raise LibraryError(f"{self.root} was written by a newer objscan (index schema {version})",
+                                   code="library_version", detail={"schema": version})
+            db.execute("""CREATE TABLE IF NOT EXISTS models (
+                id TEXT PRIMARY KEY, object_name TEXT NOT NULL, created REAL NOT NULL, session TEXT,
+                configuration TEXT, points INTEGER NOT NULL, has_mesh INTEGER NOT NULL, metadata TEXT NOT NULL)""")
+            db.execute("CREATE INDEX IF NOT EXISTS models_object ON models(object_name)")
+            db.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+
+    def _reconcile(self) -> ReconcileReport:
+        """Bring files and index back into agreement after a crash (rule in the module doc)."""
+        rep = ReconcileReport()
+        for sub, found in ((STAGING, rep.removed_staging), (TRASH, rep.removed_trash)):
+            for d in sorted((self.root / sub).iterdir()):
+                shutil.rmtree(d) if d.is_dir() else d.unlink()
+                found.append(d.name)
+        entries = self.root / ENTRIES
+        with self._connect() as db:
+            indexed = {r[0] for r in db.execute("SELECT id FROM models")}
+        on_disk = {d.name for d in entries.iterdir() if d.is_dir()}
+        for stray in (p for p in entries.iterdir() if not p.is_dir()):
+            stray.unlink()
+            rep.removed_incomplete.append(stray.name)
+        missing = sorted(i for i in indexed if i not in on_disk or not (entries / i / MODEL_FILE).is_file())
+        if missing:
+            with self._transaction() as db:
+                db.executemany("DELETE FROM models WHERE id = ?", [(i,) for i in missing])
+            rep.dropped_rows.extend(missing)
+            for i in missing:
+                shutil.rmtree(entries / i, ignore_errors=True)
+        for name in sorted(on_disk - indexed):
+            record = _complete_record(entries / name)
+            if record is None:
+                shutil.rmtree(entries / name)
+                rep.removed_incomplete.append(name)
+                continue
+            with self._transaction() as db:
+                db.execute("INSERT INTO models VALUES (?, ?, ?, ?, ?, ?, ?, ?)", _row(record))
+            rep.indexed.append(name)
+        return rep
+
+
+# ---------------------------------------------------------------------------------------------- helpers
+def _row(record: dict[str, Any]) -> tuple:
+    meta = record["metadata"]
+    return (record["id"], meta["object_name"], float(meta["created"]), meta.get("session"),
+            meta.get("configuration"), int(record["points"]), int(MESH_FILE in record["files"]),
+            json.dumps(meta, default=_json_default))
+
+
+def _complete_record(folder: Path) -> dict[str, Any] | None:
+    """The metadata record of an entry folder if every file it lists is intact, else None."""
+    try:
+        record = json.loads((folder / METADATA_FILE).read_text())
+        if record.get("id") != folder.name or MODEL_FILE not in record.get("files", {}):
+            return None
+        ModelMetadata.from_dict(record["metadata"])
+        for name, info in record["files"].items():
+            p = folder / name
+            if not p.is_file() or p.stat().st_size != int(info["bytes"]) or _sha256(p) != info["sha256"]:
+                return None
+        return record
+    except (OSError, ValueError, KeyError, TypeError, BadModelInput):
+        return None
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _write_synced(path: Path, data: bytes) -> dict[str, Any]:
+    with open(path, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
+    return {"bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}
+
+
+def _fsync_file(path: Path) -> dict[str, Any]:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+    return {"bytes": path.stat().st_size, "sha256": _sha256(path)}
+
+
+def _fsync_dir(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _write_cloud(path: Path, pcd: o3d.geometry.PointCloud) -> dict[str, Any]:
+    if not o3d.io.write_point_cloud(str(path), pcd, write_ascii=False):
+        raise LibraryError(f"could not write {path}", code="io_error")
+    return _fsync_file(path)
+
+
+def _write_mesh(path: Path, mesh: o3d.geometry.TriangleMesh) -> dict[str, Any]:
+    if not o3d.io.write_triangle_mesh(str(path), mesh, write_ascii=False):
+        raise LibraryError(f"could not write {path}", code="io_error")
+    return _fsync_file(path)
+
+
+def _write_npz(path: Path, desc: dict[str, Any]) -> dict[str, Any]:
+    import io
+
+    buf = io.BytesIO()
+    np.savez(buf, whole=np.asarray(desc["whole"]), views=np.asarray(desc["views"]),
+             n_bins=np.asarray(desc["n_bins"]))
+    return _write_synced(path, buf.getvalue())
+
+
+def _load_cloud(model: ModelInput) -> o3d.geometry.PointCloud:
+    """Any accepted model input as a validated Open3D cloud (finite, non-empty)."""
+    if isinstance(model, str | Path):
+        p = Path(model)
+        if not p.is_file():
+            raise BadModelInput(f"{p} does not exist", code="io_error", detail={"path": str(p)})
+        pcd = o3d.io.read_point_cloud(str(p))
+    elif isinstance(model, PointCloud):
+        from services.registration.cloud import CloudError, to_o3d
+
+        try:
+            pcd = to_o3d(model)
+        except CloudError as exc:
+            raise BadModelInput(exc.message, detail=exc.detail) from None
+    elif isinstance(model, o3d.geometry.PointCloud):
+        pcd = o3d.geometry.PointCloud(model)
+    elif isinstance(model, np.ndarray):
+        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(check_xyz(model, "model")))
+    else:
+        raise BadModelInput(f"cannot store a {type(model).__name__} as a model", detail={"type": type(model).__name__})
+    check_xyz(np.asarray(pcd.points), "model")
+    return pcd
+
+
+def _load_mesh(mesh: str | Path | o3d.geometry.TriangleMesh) -> o3d.geometry.TriangleMesh:
+    m = mesh if isinstance(mesh, o3d.geometry.TriangleMesh) else o3d.io.read_triangle_mesh(str(mesh))
+    if len(m.triangles) == 0:
+        raise BadModelInput(f"mesh {mesh} has no triangles", detail={"mesh": str(mesh)})
+    if not np.isfinite(np.asarray(m.vertices)).all():
+        raise BadModelInput("mesh vertices contain NaN or inf")
+    return m
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
