@@ -52,6 +52,10 @@ def _print_comparison(report: dict[str, Any]) -> int:
     if cmp_["identical"]:
         print(f"model identical to the recording ({cmp_['points_replayed']} points, byte for byte)")
         return 0
+    if cmp_.get("xyz_identical") and cmp_.get("rgb_identical"):
+        print(f"model points and colours identical to the recording ({cmp_['points_replayed']} points, byte for "
+              f"byte); normals differ by at most {cmp_.get('normals_max_diff', 0.0):.2g}")
+        return 0
     print(f"model differs from the recording: chamfer {cmp_['chamfer_mm']} mm, hausdorff {cmp_['hausdorff_mm']} mm, "
           f"points {cmp_['points_recorded']} -> {cmp_['points_replayed']} "
           f"({'within' if cmp_['within_tolerance'] else 'beyond'} {cmp_['tolerance_mm']} mm)")
