@@ -68,11 +68,12 @@ def global_register(source: np.ndarray | o3d.geometry.PointCloud, target: np.nda
     default, stops after a run whose pose was confirmed). The result's ``seconds`` include down-sampling,
     normals and features.
 
-    ``prior_T`` (e.g. the identity for views already pre-rotated by their commanded turn) is returned
-    instead of the method's answer when a short point-to-plane ICP from it reaches a weighted LCP within
-    ``prior_margin`` of the method's: when the geometry cannot tell poses apart - a can turned about its
-    axis - the prior is the better guess, while a clearly better fit still wins. The returned ``T`` is then
-    the prior itself (its scores are those of the nearby optimum), and ``extra["kept_prior"]`` is True.
+    ``prior_T`` (e.g. the identity for views already pre-rotated by their commanded turn) has its
+    translation corrected by a translation-only ICP (its rotation is kept: that is the trusted part, and
+    a free ICP would slide a can about its axis) and is returned instead of the method's answer when it
+    then scores within ``prior_margin`` of it (weighted LCP): when the geometry cannot tell poses apart
+    the prior is the better guess, while a clearly better fit still wins. ``extra["kept_prior"]`` says
+    which happened.
     """
     cfg = config or GlobalRegistrationConfig()
     if method not in METHODS:
@@ -106,11 +107,11 @@ def global_register(source: np.ndarray | o3d.geometry.PointCloud, target: np.nda
     T, kept_prior = result.T, False
     if prior_T is not None:
         prior = check_transform(prior_T, "prior_T")
-        # a prior is as good as its nearest local optimum: score it after a short ICP at this voxel, but
-        # return the prior itself - on a can that ICP slides freely about the axis and loses the turn
-        nearby = np.array(reg.registration_icp(src, tgt, 2.0 * voxel, prior, reg.TransformationEstimationPointToPlane(),
-                                               reg.ICPConvergenceCriteria(max_iteration=30)).transformation)
-        prior_lcp, prior_weighted = score_alignment(np.asarray(src.points), np.asarray(tgt.points), nearby, voxel)
+        # the prior's rotation is what we trust; its translation inherits centre-estimate errors, so it is
+        # corrected by a translation-only ICP (which cannot slide a can about its axis) before scoring
+        src_xyz, tgt_xyz = np.asarray(src.points), np.asarray(tgt.points)
+        prior = _translation_only_icp(src_xyz, cKDTree(tgt_xyz), prior, 2.0 * voxel)
+        prior_lcp, prior_weighted = score_alignment(src_xyz, tgt_xyz, prior, voxel)
         if prior_weighted >= weighted - prior_margin:
             T, lcp, weighted, kept_prior = prior, prior_lcp, prior_weighted, True
     return replace(result, T=T, lcp_score=lcp, score=weighted, seconds=perf_counter() - t0,
@@ -167,6 +168,23 @@ def refine_icp(source: np.ndarray | o3d.geometry.PointCloud, target: np.ndarray 
                                reg.TransformationEstimationPointToPlane(),
                                reg.ICPConvergenceCriteria(max_iteration=iterations))
     return np.array(out.transformation), float(out.fitness), float(out.inlier_rmse)
+
+
+def _translation_only_icp(src: np.ndarray, tgt_tree: cKDTree, T: np.ndarray, max_dist: float,
+                          iterations: int = 20) -> np.ndarray:
+    """``T`` with its translation refined by point-to-point ICP that keeps the rotation fixed."""
+    T = T.copy()
+    rotated = src @ T[:3, :3].T
+    for _ in range(iterations):
+        dist, idx = tgt_tree.query(rotated + T[:3, 3], k=1, distance_upper_bound=max_dist)
+        ok = np.isfinite(dist)
+        if ok.sum() < 3:
+            break
+        step = np.mean(tgt_tree.data[idx[ok]] - (rotated[ok] + T[:3, 3]), axis=0)
+        T[:3, 3] += step
+        if np.linalg.norm(step) < 1e-5:
+            break
+    return T
 
 
 def _feature_based(src: o3d.geometry.PointCloud, tgt: o3d.geometry.PointCloud, method: str, voxel: float,
