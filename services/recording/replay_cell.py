@@ -148,11 +148,13 @@ class ReplayCellService(Service):
         self.atol = atol
 
     async def setup(self) -> None:
+        r = self.robot
         exchanges: list[Exchange] = []
         for path in self.recordings:
             exchanges += read_recording(path).exchanges
-        self.replies = RecordedReplies(exchanges, self.atol)
-        r = self.robot
+        mine = ({keys.camera_capture(r)} if self.role == "camera"
+                else {keys.arm(r, op) for op in ("move", "gripper", "scene", "stop")})
+        self.replies = RecordedReplies([e for e in exchanges if e.key in mine], self.atol)
         if self.role == "camera":
             self.queryable(keys.camera_capture(r), self._answer)
         else:
