@@ -11,6 +11,7 @@ import json
 import queue
 import signal
 import socket
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -82,6 +83,7 @@ def ensure_cell(port: int, backend: str, log_dir: Path, services: list[str] | No
 
 def run(args) -> int:  # noqa: ANN001
     t0 = time.time()
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # unwind: the services this started are stopped
     session_dir = Path(args.resume or args.out or f"sessions/{Path(args.object).stem}-{time.strftime('%Y%m%d-%H%M%S')}")
     session_dir = session_dir.resolve()
     with ensure_cell(args.port, args.backend, session_dir / "logs") as group:
@@ -123,8 +125,9 @@ def run(args) -> int:  # noqa: ANN001
 
 def _follow(updates: queue.Queue[dict[str, Any]], views: int | None) -> dict[str, Any]:
     last: dict[str, Any] = {}
-    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} views"),
-                  TimeElapsedColumn(), console=console) as progress:
+    columns = (TextColumn("[bold]{task.description}"), BarColumn(),
+               TextColumn("{task.completed}/{task.total} views"), TimeElapsedColumn())
+    with Progress(*columns, console=console) as progress:
         task = progress.add_task("starting", total=views or 12)
         while True:
             try:

@@ -36,7 +36,7 @@ from common.api import (
 from common.codec import Message
 from common.errors import RemoteError, ServiceUnavailable
 from common.log import event
-from common.messages import Ok, Plane, PointCloud, Request, RGBDFrame
+from common.messages import JointState, Ok, Plane, PointCloud, Request, RGBDFrame
 
 log = logging.getLogger("objscan.orchestrator")
 
@@ -105,6 +105,9 @@ class Cell:
 
     async def clear_object_box(self) -> None:
         await self.set_object_box(np.zeros(3), np.zeros(3))
+
+    async def state(self) -> JointState:
+        return _expect(await self._request(keys.arm(self.robot, "state"), timeout=10.0), JointState)
 
     async def estop(self) -> None:
         await self._request(keys.arm(self.robot, "stop"), timeout=5.0)

@@ -37,7 +37,7 @@ from services.orchestrator.planning import (
     TurnPoses,
     look_pose,
     object_box,
-    radial_misalignment_deg,
+    radial_offset_deg,
     scan_pose_candidates,
     turn_arc,
     turn_sequences,
@@ -244,6 +244,12 @@ class Acquisition:
         if key in self.j["scan_sets"]:
             return [np.asarray(T) for T in self.j["scan_sets"][key]]
         center, height = self._object_estimate(view - 1 if view > 0 else -1)
+        if view > 0:  # dry runs plan from the current posture: start them from the high home posture
+            await self._escape(center, height)
+            try:
+                await self.cell.move("home", speed=0.6)
+            except RemoteError as exc:
+                self.decide("could not go home before choosing scan poses", code=exc.code)
         reasons = []
         for candidate in scan_pose_candidates(center, height, self.config.scan):
             try:
@@ -328,11 +334,14 @@ class Acquisition:
         failures: list[str] = []
         attempts = 0
         failed_before = set(self.j.setdefault("failed_grasps", {}).get(str(k), []))
-        order = sorted(range(len(self._plan.grasps)),  # reachable-looking first, then by rank (stable)
-                       key=lambda i: radial_misalignment_deg(self._plan.grasps[i], view.center) > 50.0)
+        offsets = [radial_offset_deg(g, view.center) for g in self._plan.grasps]
+        order = sorted(range(len(offsets)), key=lambda i: abs(offsets[i]) > 50.0)  # radial-ish first, then rank
         for gi in order:
             grasp = self._plan.grasps[gi]
-            for seq in turn_sequences(grasp, cfg.turn, view.height):
+            # the turn direction that brings the hand back toward radial first
+            sequences = sorted(turn_sequences(grasp, cfg.turn, view.height),
+                               key=lambda sq: abs(offsets[gi] + sq.direction * cfg.turn_deg))
+            for seq in sequences:
                 signature = f"{grasp.kind}:{gi}:{seq.name}"
                 if attempts >= cfg.max_grasp_attempts:
                     break
@@ -341,7 +350,7 @@ class Acquisition:
                 attempts += 1
                 self.j["counters"]["grasp_attempts"] += 1
                 try:
-                    await self._execute_turn(grasp, seq, box_c, box_e, view.center)
+                    await self._execute_turn(grasp, seq, box_c, box_e, view.center, view.height)
                 except GraspFailed as exc:
                     self.j["counters"]["slips"] += 1
                     self.j["failed_grasps"].setdefault(str(k), []).append(signature)
@@ -390,50 +399,103 @@ class Acquisition:
         await self.cell.move("home", speed=speed)
         return await self.cell.move("pose", target=target, frame=frame, speed=speed)
 
+    async def _short_move(self, target: np.ndarray, speed: float, contact: bool = True) -> MoveResult:
+        """A few centimetres near the object: a straight line, or a joint motion where the line needs a flip."""
+        try:
+            return await self.cell.move("linear", target=target, speed=speed, contact=contact)
+        except RemoteError as exc:
+            if not exc.code.startswith("line_"):
+                raise
+            return await self.cell.move("pose", target=target, speed=speed, contact=contact)
+
+    async def _escape(self, center: np.ndarray, height: float) -> None:
+        """Get the hand clear of the object: back along its approach, then up above the object's top.
+
+        Needed after a failed attempt left the hand close to the object, where every joint-space motion
+        would be refused as colliding with the object's box.
+        """
+        m = self.config.turn
+        state = await self.cell.state()
+        T = np.asarray(state.T_base_gripper)
+        safe_z = height + m.clearance
+        if T[2, 3] >= safe_z - 1e-3 or np.linalg.norm(T[:2, 3] - center[:2]) > 0.2:
+            return
+        back = T.copy()
+        back[:3, 3] -= T[:3, 0] * 0.09
+        up = T.copy()
+        up[2, 3] = max(up[2, 3], safe_z)
+        back_up = back.copy()
+        back_up[2, 3] = max(back_up[2, 3], safe_z)
+        for route in ((back, back_up), (up,)):
+            try:
+                for target in route:
+                    await self._short_move(target, m.approach_speed_scale)
+                return
+            except RemoteError as exc:
+                self.decide("escape route failed", code=exc.code)
+        # no straight way out: home by a joint motion, allowed through the object's box (there is no motion
+        # planner to go around it; in the twin the hand cannot topple the object)
+        self.decide("escaping through the object box to home")
+        await self.cell.clear_object_box()
+        await self.cell.move("home", speed=m.approach_speed_scale)
+
     async def _execute_turn(self, grasp: Grasp, seq: TurnPoses, box_c: np.ndarray, box_e: np.ndarray,
-                            center: np.ndarray) -> None:
+                            center: np.ndarray, height: float) -> None:
         """Pick, lift, turn about the table normal, set down, release, retreat. Raises on failure.
 
         Motions before the gripper closes may fail harmlessly (RemoteError: the caller tries the next pose);
-        a failure while holding sets the object back down where it was before re-raising.
+        a failure while holding sets the object back down where the hand is before re-raising.
         """
         c, m = self.cell, self.config.turn
         opening = min(0.105, grasp.width + m.open_margin)
         self._step = "open"
         await c.gripper(opening, m.gripper_force)
+        await self._escape(center, height)
         await c.set_object_box(box_c, box_e)
         self._step = "to above pre-grasp"
         await self._transit(seq.above_pregrasp, "gripper", m.speed_scale)
         self._step = "down to pre-grasp"
-        await c.move("linear", target=seq.pregrasp, speed=m.approach_speed_scale)
+        await self._short_move(seq.pregrasp, m.approach_speed_scale, contact=False)
         self._step = "approach"
         await c.move("linear", target=seq.grasp, speed=m.approach_speed_scale, contact=True)
         self._step = "close"
         held = await c.gripper(0.0, m.gripper_force)
         if not held.holding:
             await c.gripper(opening, m.gripper_force)
-            await c.move("linear", target=seq.pregrasp, speed=m.approach_speed_scale, contact=True)
-            await c.move("linear", target=seq.above_pregrasp, speed=m.approach_speed_scale)
+            await self._escape(center, height)
             raise GraspFailed(held.reason or "nothing between the pads")
         await c.clear_object_box()
         try:
             self._step = "lift, turn, set down"
-            await c.move("linear", target=seq.lifted, speed=m.approach_speed_scale, contact=True)
+            await self._short_move(seq.lifted, m.approach_speed_scale)
             for waypoint in turn_arc(seq.lifted, seq.turned_lifted, center):
-                await c.move("linear", target=waypoint, speed=m.approach_speed_scale, contact=True)
-            await c.move("linear", target=seq.turned, speed=m.approach_speed_scale, contact=True)
+                # 5 degrees apart, each IK warm-started from the last: the joint path stays on the arc
+                await c.move("pose", target=waypoint, speed=m.approach_speed_scale, contact=True)
+            await self._short_move(seq.turned, m.approach_speed_scale)
         except RemoteError:
-            try:  # put it back where it stood, then let the caller try another pose
-                await c.move("linear", target=seq.grasp, speed=m.approach_speed_scale, contact=True)
-            finally:
-                await c.gripper(opening, m.gripper_force)
-            await c.move("linear", target=seq.pregrasp, speed=m.approach_speed_scale, contact=True)
-            await c.move("linear", target=seq.above_pregrasp, speed=m.approach_speed_scale)
+            await self._set_down_here(m.lift)
+            await c.gripper(opening, m.gripper_force)
+            await self._escape(center, height)
             raise
         await c.gripper(opening, m.gripper_force)
-        await c.move("linear", target=seq.retreat, speed=m.approach_speed_scale, contact=True)
+        self._step = "retreat"
+        try:
+            await self._short_move(seq.retreat, m.approach_speed_scale)
+            await self._short_move(seq.above_retreat, m.approach_speed_scale)
+        except RemoteError as exc:  # the object is turned and released: escape as well as we can
+            self.decide("retreat failed; escaping", code=exc.code)
+            await self._escape(center, height)
         await c.set_object_box(box_c, box_e)
-        await c.move("linear", target=seq.above_retreat, speed=m.approach_speed_scale)
+
+    async def _set_down_here(self, lift: float) -> None:
+        """While holding, lower the hand by ``lift`` where it is (the object back on the table)."""
+        state = await self.cell.state()
+        T = np.asarray(state.T_base_gripper).copy()
+        T[2, 3] -= lift
+        try:
+            await self._short_move(T, self.config.turn.approach_speed_scale)
+        except RemoteError as exc:
+            self.decide("could not lower the object before releasing it", code=exc.code)
 
     async def model(self) -> State:
         n = self.config.views

@@ -119,18 +119,22 @@ def turn_arc(start: np.ndarray, end: np.ndarray, center: np.ndarray, axis: np.nd
     return [*points, end]
 
 
-def radial_misalignment_deg(grasp: Grasp, center: np.ndarray) -> float:
-    """Angle between a grasp's approach (gripper x, horizontal part) and the line from the arm's base to the
-    object: the arm reaches far-away low poses only roughly radially, so side approaches are tried last."""
+def radial_offset_deg(grasp: Grasp, center: np.ndarray) -> float:
+    """Signed angle (deg, counter-clockwise seen from above) from the line base → object to a grasp's
+    horizontal approach direction; 0 for a straight-down approach.
+
+    The arm reaches far-away low poses only roughly radially, so side approaches are tried last, and a
+    turn is made in the direction that brings the hand back toward radial.
+    """
     if "grasp" not in grasp.poses:
         return 180.0
     T = grasp.poses["grasp"].matrix()
-    radial = np.array([center[0], center[1], 0.0])
-    approach = np.array([T[0, 0], T[1, 0], 0.0])
-    if np.linalg.norm(approach) < 1e-6:  # top-down: straight down is neutral
+    radial = np.array([center[0], center[1]])
+    approach = np.array([T[0, 0], T[1, 0]])
+    if np.linalg.norm(approach) < 1e-6:
         return 0.0
-    cos = float(radial @ approach / (np.linalg.norm(radial) * np.linalg.norm(approach) + 1e-12))
-    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    cross = radial[0] * approach[1] - radial[1] * approach[0]
+    return float(np.degrees(np.arctan2(cross, radial @ approach)))
 
 
 def _at_height(T: np.ndarray, z: float) -> np.ndarray:

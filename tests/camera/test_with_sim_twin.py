@@ -26,8 +26,9 @@ def test_twin_uses_the_camera_presets(size):
 
 
 def test_sim_camera_on_the_twin():
-    world = world_mod.World("milk", profile="ideal", seed=3)
-    T_true = scenario.camera_look_at(np.array([0.0, 0.0, 0.35]), np.array([0.36, 0.0, 0.1]))
+    obj_xy = np.array([0.36, 0.0])
+    world = world_mod.World("milk", profile="ideal", seed=3, object_pose=world_mod.default_object_pose(*obj_xy))
+    T_true = scenario.camera_look_at(np.array([0.0, 0.0, 0.35]), np.array([*obj_xy, 0.1]))
 
     def render(T, width, height):
         return world.render_frame(T_true, d435_color_intrinsics(width, height))
