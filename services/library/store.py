@@ -146,7 +146,7 @@ class ModelLibrary:
         The GOOD descriptors are computed here (whole model + synthetic views) and the whole-model one is
         copied into ``metadata.descriptor``. Raises ``BadModelInput`` for an empty, NaN or unreadable model.
         """
-        meta = metadata if isinstance(metadata, ModelMetadata) else ModelMetadata.from_dict(dict(metadata))
+        meta = metadata if isinstance(metadata, ModelMetadata) else ModelMetadata.from_dict(metadata)
         meta.validate()
         pcd = _load_cloud(model_ply)
         mesh_obj = _load_mesh(mesh) if mesh is not None else None
