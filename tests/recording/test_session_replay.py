@@ -1,0 +1,137 @@
+"""Record a short simulated acquisition through real service processes, then replay it.
+
+One 3-view sim session is recorded once for the module (about 2-3 minutes on a shared 2-core box);
+the replays run against the same code, so the model must come out the same.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from common import keys
+from common.client import request_sync
+from common.errors import ObjscanError
+from common.launcher import ServiceGroup
+from common.messages import Ok, Request
+from services.cli.cells import cell_specs
+from services.recording.reader import read_recording
+
+ROBOT = keys.DEFAULT_ROBOT
+CONFIG = {"object": "milk", "views": 3, "profile": "robot-turned", "seed": 3, "width": 640, "height": 480}
+
+
+def _wait_status(group: ServiceGroup, timeout: float) -> dict:
+    deadline = time.monotonic() + timeout
+    status: dict = {}
+    while time.monotonic() < deadline:
+        time.sleep(1.0)
+        try:
+            reply = request_sync(group.session, keys.orchestrator(ROBOT, "status"), timeout=10)
+        except ObjscanError:
+            continue
+        if isinstance(reply, Ok):
+            status = dict(reply.info)
+            if status.get("status") in ("done", "failed", "stopped"):
+                return status
+    raise TimeoutError(f"acquisition not finished after {timeout} s: {status}")
+
+
+def _wait_closed(path: Path, timeout: float = 60.0) -> None:
+    """The recorder closes just after the final status; wait for its ``closed`` record before stopping."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if path.is_file() and "closed" in read_recording(path).metadata:
+            return
+        time.sleep(0.5)
+    raise TimeoutError(f"{path} was not closed")
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("recorded")
+    session = root / "session"
+    with ServiceGroup(log_dir=root / "logs", robot=ROBOT) as group:
+        group.launch(cell_specs(), timeout=240)
+        request_sync(group.session, keys.orchestrator(ROBOT, "run"),
+                     Request(params={"out": str(session), "config": CONFIG}), timeout=30)
+        status = _wait_status(group, 900)
+        assert status["status"] == "done", status
+        _wait_closed(session / "session.mcap")
+    return session
+
+
+def test_the_recording_reads_back_with_every_channel_and_message(recorded):
+    path = recorded / "session.mcap"
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        counts: dict[str, int] = {}
+        for _s, channel, _m in reader.iter_messages():
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+        summary = reader.get_summary()
+        meta = {m.name: m.metadata for m in reader.iter_metadata()}
+    written = json.loads(meta["closed"]["counts"])  # what the recorder says it wrote
+    assert counts == written
+    assert summary.statistics.message_count == sum(written.values())
+    journal = json.loads((recorded / "journal.json").read_text())
+    assert counts[f"{keys.camera_capture(ROBOT)}?reply"] == journal["counters"]["captures"]
+    assert counts[f"{keys.REGISTRATION_DYNAMIC}?reply"] == 1
+    assert counts[keys.arm(ROBOT, "state")] > 100  # the 50 Hz joint state stream
+    assert counts[keys.orchestrator(ROBOT, "status")] > 5
+    for topic in ("/camera/color", "/camera/depth", "/camera/calibration", "/tf", "/model", "/views/00/object",
+                  "/views/02/object", "/grasps", "/arm/joints"):
+        assert counts.get(topic, 0) > 0, topic
+    session = json.loads(meta["session"]["config"])
+    assert {k: session[k] for k in CONFIG} == CONFIG
+    assert "RGBDFrame" in json.loads(meta["objscan"]["schema_versions"])
+
+
+def test_recorded_frames_are_the_saved_frames(recorded):
+    """The capture replies in the recording are the frames of the session folder, byte for byte."""
+    from common.session_folder import read_scan
+
+    rec = read_recording(recorded)
+    frames = [e.reply_message() for e in rec.exchanges_on(keys.camera_capture(ROBOT))]
+    saved = read_scan(recorded, 2, 2)  # the last capture of the run
+    assert np.array_equal(frames[-1].color, saved.color) and np.array_equal(frames[-1].depth, saved.depth)
+
+
+def test_recorded_payloads_are_what_the_codec_sends(recorded):
+    """Re-encoding a decoded payload gives the same bytes: the recorded bytes are the wire bytes."""
+    from common.codec import decode
+
+    rec = read_recording(recorded)
+    for ex in rec.exchanges:
+        assert decode(ex.reply).encode() == ex.reply, ex.key
+        if ex.request:
+            assert decode(ex.request).encode() == ex.request, ex.key
+
+
+def test_registration_replay_reproduces_the_model(recorded, tmp_path):
+    from services.recording.registration import replay_registration
+
+    report = replay_registration(recorded, tmp_path / "replay")
+    cmp_ = report["comparison"]
+    assert (tmp_path / "replay" / "model.ply").is_file()
+    assert cmp_["xyz_identical"] and cmp_["rgb_identical"], cmp_
+    assert cmp_.get("normals_max_diff", 0.0) < 1e-5, cmp_
+
+
+def test_full_replay_reproduces_the_model_without_the_sim(recorded, tmp_path):
+    from services.recording.replay import replay_session
+
+    out = tmp_path / "full"
+    report = replay_session(recorded, out, timeout_s=900)
+    why = {"last_error": report["status"].get("last_error"), "arm": report["arm"].get("diverged"),
+           "camera": report["camera"].get("diverged")}
+    assert report["status"]["status"] == "done", why
+    assert report["arm"]["diverged"] is None and report["camera"]["diverged"] is None
+    assert report["camera"]["remaining"] == {keys.camera_capture(ROBOT): 0}  # every recorded frame was served
+    cmp_ = report["comparison"]
+    assert cmp_["xyz_identical"] and cmp_["rgb_identical"], cmp_
+    assert (out / "model.ply").is_file() and (out / "session.mcap").is_file()  # the replay is recorded too
