@@ -61,7 +61,7 @@ def run(args) -> int:  # noqa: ANN001
 
         xyz = np.asarray(o3d.io.read_point_cloud(str(model)).points)
         gt, posed = ground_truth_points(args.gt, session)
-        metrics = evaluate_model(xyz, gt)
+        metrics = evaluate_model(xyz, gt, align=True, init_T=np.eye(4)) if posed else evaluate_model(xyz, gt)
         report["accuracy"] = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in metrics.items()}
         report["accuracy"]["gt_posed_from_session"] = posed
     report["seconds_total"] = round(time.perf_counter() - t0, 3)

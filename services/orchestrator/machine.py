@@ -339,8 +339,14 @@ class Acquisition:
         for gi in order:
             grasp = self._plan.grasps[gi]
             # the turn direction that brings the hand back toward radial first
+            # once the session has turned one way it keeps turning that way (12 views cover 360 degrees in
+            # order); before that, the direction that brings the hand back toward radial goes first
+            fixed = self.j.get("turn_direction")
             sequences = sorted(turn_sequences(grasp, cfg.turn, view.height),
-                               key=lambda sq: abs(offsets[gi] + sq.direction * cfg.turn_deg))
+                               key=lambda sq: (fixed is not None and sq.direction != fixed,
+                                               abs(offsets[gi] + sq.direction * cfg.turn_deg)))
+            if fixed is not None:
+                sequences = [sq for sq in sequences if sq.direction == fixed]
             for seq in sequences:
                 signature = f"{grasp.kind}:{gi}:{seq.name}"
                 if attempts >= cfg.max_grasp_attempts:
@@ -365,6 +371,7 @@ class Acquisition:
                     continue
                 self.decide("turned", grasp=gi, pose=seq.name, kind=grasp.kind, direction=seq.direction)
                 self.j["turns_deg"].append(self.j["turns_deg"][k] + seq.direction * cfg.turn_deg)
+                self.j.setdefault("turn_direction", seq.direction)
                 self.j["view"] = k + 1
                 self.j["grasp_mode"] = "auto"
                 self._plan = None
@@ -532,5 +539,12 @@ class Acquisition:
         if T0 is not None:
             T0 = np.asarray(T0, float)
             xyz = (xyz - T_now[:3, 3]) @ T_now[:3, :3] @ T0[:3, :3].T + T0[:3, 3]
-        metrics = await asyncio.to_thread(evaluate_model, np.asarray(model_xyz, float), xyz)
-        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in metrics.items()}
+        model = np.asarray(model_xyz, float)
+        # The true pose at view 0 places the ground truth: ICP-align from there (as the paper aligns), never
+        # from scratch, where a nearly square carton can lock 90 degrees off. Also report the raw figures.
+        aligned = await asyncio.to_thread(evaluate_model, model, xyz, align=True, init_T=np.eye(4))
+        raw = await asyncio.to_thread(evaluate_model, model, xyz, align=False)
+        out = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in aligned.items()}
+        out["unaligned"] = {k: v for k, v in raw.items() if isinstance(v, float)}
+        out["gt_posed_from_truth"] = T0 is not None
+        return out
