@@ -200,3 +200,11 @@ def test_overlaps_share_one_setup_and_report_each_run():
     best = max(runs, key=lambda r: r.score)
     rms, rot = _errors(best.T, T, transform_points(invert(T), target))
     assert rot < 3.0 and rms < 0.006
+
+
+def test_degenerate_clouds_return_identity_without_crashing():
+    """A straight line has no coplanar base: no pose is claimed (identity, LCP 0), nothing raises."""
+    line = np.column_stack([np.linspace(0, 0.1, 50), np.zeros(50), np.zeros(50)])
+    res = register_4pcs(line, line, max_bases=10)
+    np.testing.assert_array_equal(res.T, np.eye(4))
+    assert res.lcp_score == 0.0 and res.n_bases_tried == 10

@@ -357,6 +357,7 @@ def _select_base(S: np.ndarray, rng: np.random.Generator, *, max_base: float, co
                              np.linalg.norm(c - b, axis=1)])
     area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
     valid = (sides.max(axis=1) <= max_base) & (sides.min(axis=1) > 2.0 * coplanar_tol)
+    valid &= area > (2.0 * coplanar_tol) ** 2  # not (nearly) collinear: the base plane must be defined
     if not np.any(valid):
         return None
     k = int(np.argmax(np.where(valid, area, -1.0)))
