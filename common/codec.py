@@ -333,8 +333,12 @@ def _decode_array(value: Any, spec: ArraySpec | None, path: str) -> np.ndarray:
     if spec is not None and dtype.str != spec.dtype:
         raise _bad("bad_dtype", f"expected dtype {spec.dtype}, got {dtype.str}", path,
                    expected=spec.dtype, got=dtype.str)
-    if len(shape) > 8 or not all(isinstance(d, int) and not isinstance(d, bool) and d >= 0 for d in shape):
-        raise _bad("bad_shape", "shape must be a short list of non-negative integers", path, shape=shape)
+    # A dimension above the payload limit cannot be real; with another dimension 0 it would pass the
+    # byte-length check and then crash reshape (fuzzing finding, tests/fuzz/test_codec_regressions.py).
+    if len(shape) > 8 or not all(isinstance(d, int) and not isinstance(d, bool) and 0 <= d <= MAX_PAYLOAD_BYTES
+                                 for d in shape):
+        raise _bad("bad_shape", "shape must be a short list of non-negative integers within the payload limit",
+                   path, shape=shape)
     count = math.prod(shape)
     if count * dtype.itemsize != len(data):
         raise _bad("bad_shape", "byte length does not match dtype and shape", path,
