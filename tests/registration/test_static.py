@@ -151,6 +151,7 @@ def test_object_height_matches_the_mesh():
     assert abs(result.object_height - world.obj.height) < 0.004
 
 
+@pytest.mark.slow  # 15-40 s: three seeded RANSAC runs on the fallback path
 def test_global_fallback_when_the_arm_pose_is_badly_wrong():
     frames, _, _ = labelled_view("milk", seed=5)
     from common.geometry import make_transform, rotation_about_axis
