@@ -13,7 +13,7 @@ from bench.report import print_figures
 
 def available() -> list[str]:
     return sorted(m.name for m in pkgutil.iter_modules(bench.__path__) if not m.name.startswith("_")
-                  and m.name not in ("report", "common"))
+                  and m.name not in ("report", "frame_server"))
 
 
 def register(sub) -> None:  # noqa: ANN001
