@@ -326,7 +326,7 @@ def _decode_array(value: Any, spec: ArraySpec | None, path: str) -> np.ndarray:
         raise _bad("bad_type", "array map has wrong member types", path)
     try:
         dtype = np.dtype(dtype_str)
-    except TypeError:
+    except Exception:  # TypeError, but also SyntaxError for ",f4" and ValueError (fuzzing finding)
         raise _bad("bad_dtype", f"unknown dtype {dtype_str!r}", path) from None
     if dtype.kind not in "biuf" or dtype.hasobject:
         raise _bad("bad_dtype", f"dtype {dtype_str!r} is not allowed", path)

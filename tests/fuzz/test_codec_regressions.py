@@ -23,3 +23,13 @@ def test_huge_dimension_with_zero_elements_is_a_wire_error(raw, code):
     with pytest.raises(WireError) as err:
         decode(pack(raw))
     assert err.value.code == code
+
+
+@pytest.mark.parametrize("dtype", [",f4", ",", "i4,,f8", "(", "f8)", "[('a', 'f8')]", "\x00", "f" * 10000])
+def test_dtype_strings_numpy_cannot_parse_are_wire_errors(dtype):
+    """np.dtype(",f4") raises SyntaxError (not TypeError): it escaped decode() and would end a subscriber's
+    receive loop, which only catches WireError (atheris finding)."""
+    raw = {"type": "PointCloud", "v": 1, "xyz": {"nd": dtype, "s": [0, 3], "b": b""}}
+    with pytest.raises(WireError) as err:
+        decode(pack(raw))
+    assert err.value.code == "bad_dtype"
