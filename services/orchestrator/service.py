@@ -22,7 +22,7 @@ from services.orchestrator.cell import Cell
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.machine import Acquisition
 from services.orchestrator.store import SessionStore
-from services.recording.hook import describe_run, run_recorded, start_recording
+from services.recording.hook import recorded_acquisition
 
 
 class OrchestratorService(Service):
@@ -63,11 +63,10 @@ class OrchestratorService(Service):
             store = SessionStore(path)
             config = AcquisitionConfig.from_dict(params.get("config", {}))
         # session recording (docs/recording.md): on unless the run says ``record: false``
-        recorder = start_recording(path, self.session, self.robot) if params.get("record", True) else None
-        cell = Cell(recorder.wrap(self.request) if recorder else self.request, self.robot)
-        self.current = Acquisition(cell, store, config, on_status=self._publish)
-        describe_run(recorder, self.current)
-        self.task = self.spawn(run_recorded(self.current, recorder))
+        self.current, run = recorded_acquisition(
+            lambda cell: Acquisition(cell, store, config, on_status=self._publish), self.request, path,
+            self.session, self.robot, enabled=params.get("record", True))
+        self.task = self.spawn(run)
         return Ok(info={"session": str(path.resolve()), "resumed": self.current.resumed})
 
     async def status(self, msg: Message | None, ctx: QueryContext) -> Ok:

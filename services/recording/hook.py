@@ -1,24 +1,29 @@
-"""The orchestrator's side of recording: one ``SessionRecorder`` per run, in a few calls.
+"""The orchestrator's side of recording: one ``SessionRecorder`` per run, in one call.
 
 ``OrchestratorService.run_acquisition`` does::
 
-    recorder = start_recording(store.path, self.session, self.robot) if params.get("record", True) else None
-    cell = Cell(recorder.wrap(self.request) if recorder else self.request, self.robot)
-    acquisition = Acquisition(cell, store, config, ...)
-    describe_run(recorder, acquisition)
-    task = spawn(run_recorded(acquisition, recorder))
+    self.current, run = recorded_acquisition(
+        lambda cell: Acquisition(cell, store, config, on_status=self._publish), self.request, path,
+        self.session, self.robot, enabled=params.get("record", True))
+    self.task = self.spawn(run)
 
-A resumed session gets a new part (``session.partN.mcap``); the earlier files are never touched.
+The acquisition gets its own ``Cell`` whose requester records every exchange (failures included), the
+recorder subscribes to the arm state and status streams, and ``run`` closes the recording when the
+acquisition ends, however it ends. A resumed session gets a new part (``session.partN.mcap``); the
+earlier files are never touched. If the acquisition cannot even be created (bad journal, ...), the
+just-opened, empty part is closed and removed.
 """
 
 from __future__ import annotations
 
 import asyncio
 import time
+from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any
 
 from common import keys
+from services.orchestrator.cell import Cell
 from services.recording.recorder import RecorderConfig, SessionRecorder, recording_path
 
 
@@ -51,3 +56,19 @@ async def run_recorded(acquisition: Any, recorder: SessionRecorder | None) -> di
         if recorder is not None:
             status = acquisition.j.get("status")
             await asyncio.to_thread(recorder.close, {"status": status, "model": acquisition.j.get("model_path")})
+
+
+def recorded_acquisition(make_acquisition: Callable[[Cell], Any], send: Any, session_dir: str | Path,
+                         zenoh_session: Any, robot: str, *, enabled: bool = True,
+                         config: RecorderConfig | None = None) -> tuple[Any, Coroutine[Any, Any, dict[str, Any]]]:
+    """(acquisition, coroutine that runs it and closes its recording): the acquisition's Cell records."""
+    recorder = start_recording(session_dir, zenoh_session, robot, config) if enabled else None
+    try:
+        acquisition = make_acquisition(Cell(recorder.wrap(send) if recorder else send, robot))
+    except BaseException:
+        if recorder is not None:
+            recorder.close({"status": "not started"})
+            recorder.path.unlink(missing_ok=True)  # nothing was recorded; keep the part numbers dense
+        raise
+    describe_run(recorder, acquisition)
+    return acquisition, run_recorded(acquisition, recorder)

@@ -242,3 +242,37 @@ def test_close_writes_everything_queued_before_it(tmp_path):
     rec.record_sample(STATE, _state(999.0).encode())  # after close: ignored, not an error
     assert counts[STATE] == 200
     assert read_recording(tmp_path / "session.mcap").counts[STATE] == 200
+
+
+def test_recorded_acquisition_wraps_the_cell_and_cleans_up_when_it_cannot_start(tmp_path):
+    from services.recording.hook import recorded_acquisition
+
+    class FakeAcquisition:
+        def __init__(self, cell):  # noqa: ANN001
+            self.cell, self.resumed, self.j = cell, False, {"status": "done"}
+            self.store = type("S", (), {"path": tmp_path})()
+            self.config = type("C", (), {"to_dict": lambda self: {"object": "milk", "seed": 2}})()
+
+        async def run(self) -> dict:
+            await self.cell._send(MOVE, MoveRequest(kind="home"), timeout=1.0)
+            return {"status": "done"}
+
+    async def send(key, msg=None, *, timeout):  # noqa: ANN001, ANN202
+        return _moved_result()
+
+    acq, run = recorded_acquisition(FakeAcquisition, send, tmp_path, None, "robot0")
+    asyncio.run(run)
+    rec = read_recording(tmp_path / "session.mcap")
+    assert [e.key for e in rec.exchanges] == [MOVE] and rec.metadata["session"]["seed"] == 2
+    assert rec.metadata["closed"]["status"] == "done"
+
+    def broken(cell):  # noqa: ANN001, ANN202
+        raise ValueError("bad journal")
+
+    with pytest.raises(ValueError):
+        recorded_acquisition(broken, send, tmp_path, None, "robot0")
+    assert recording_parts(tmp_path) == [tmp_path / "session.mcap"]  # no empty session.part1.mcap left
+
+
+def _moved_result() -> MoveResult:
+    return MoveResult(q=np.zeros(6), T_base_gripper=np.eye(4), T_base_camera=np.eye(4))

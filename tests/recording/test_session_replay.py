@@ -112,12 +112,16 @@ def test_recorded_payloads_are_what_the_codec_sends(recorded):
             assert decode(ex.request).encode() == ex.request, ex.key
 
 
-def test_registration_replay_reproduces_the_model(recorded, tmp_path):
-    from services.recording.registration import replay_registration
+def test_registration_replay_reproduces_the_model(recorded, tmp_path, capsys):
+    """``objscan replay SESSION --only registration`` (the command's own entry point)."""
+    from services.cli.cmd_replay import main
 
-    report = replay_registration(recorded, tmp_path / "replay")
+    out = tmp_path / "replay"
+    assert main([str(recorded / "session.mcap"), "--out", str(out), "--only", "registration"]) == 0
+    assert "identical to the recording" in capsys.readouterr().out
+    report = json.loads((out / "replay.json").read_text())
     cmp_ = report["comparison"]
-    assert (tmp_path / "replay" / "model.ply").is_file()
+    assert (out / "model.ply").is_file() and report["views"] == [0, 1, 2]
     assert cmp_["xyz_identical"] and cmp_["rgb_identical"], cmp_
     assert cmp_.get("normals_max_diff", 0.0) < 1e-5, cmp_
 
