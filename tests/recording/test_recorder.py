@@ -276,3 +276,16 @@ def test_recorded_acquisition_wraps_the_cell_and_cleans_up_when_it_cannot_start(
 
 def _moved_result() -> MoveResult:
     return MoveResult(q=np.zeros(6), T_base_gripper=np.eye(4), T_base_camera=np.eye(4))
+
+
+def test_info_and_recover_command(tmp_path, capsys):
+    from services.recording.__main__ import main
+
+    rec, _ = _write_sample_session(tmp_path / "session.mcap")
+    rec.close()
+    assert main(["info", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "object=milk" in out and f"{MOVE}?request" in out and "closed cleanly: True" in out
+    assert main(["recover", str(tmp_path / "session.mcap"), str(tmp_path / "copy.mcap")]) == 0
+    assert read_recording(tmp_path / "copy.mcap").counts == read_recording(tmp_path / "session.mcap").counts
+    assert main(["info", str(tmp_path / "nothing.mcap")]) == 2
