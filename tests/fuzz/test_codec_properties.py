@@ -26,6 +26,8 @@ from common.errors import WireError
 from common.msgpack_view import unpack_view
 from tests.fuzz.strategies import MESSAGE_TYPES, any_valid_message, hostile_wire, pack, valid_message
 
+pytestmark = pytest.mark.filterwarnings("ignore::hypothesis.errors.NonInteractiveExampleWarning")
+
 EXAMPLES = int(os.environ.get("OBJSCAN_FUZZ_EXAMPLES", "150"))
 fuzz = settings(max_examples=EXAMPLES, deadline=2000, suppress_health_check=[HealthCheck.too_slow,
                                                                              HealthCheck.data_too_large])
