@@ -177,7 +177,8 @@ def _view_card(v: ViewData, s: SessionData, cfg: ReportConfig) -> str:
     grasp = _grasp_record(v, chosen_mode, chosen_idx)
     if v.object_cloud is not None and frame0 is not None:
         img = _object_from_camera(v, frame0, grasp)
-        thumbs.append(_figure(img, "object" + (" + chosen grasp" if grasp else "") + " (scan_0 camera)",
+        drawn = grasp is not None and np.asarray(grasp.get("contacts", []), dtype=float).shape == (2, 3)
+        thumbs.append(_figure(img, "object" + (" + chosen grasp" if drawn else "") + " (scan_0 camera)",
                               cfg.thumb_side))
     elif v.object_cloud is None:
         thumbs.append("<p class='missing'>No isolated object (view not registered).</p>")

@@ -58,9 +58,9 @@ def test_screenshot_shows_a_rendered_page(report, tmp_path):
     background = np.array([250, 250, 250])
     ink = (np.abs(img.astype(int) - background).sum(axis=2) > 30).mean()
     assert ink > 0.08  # text, tables, renders: far from a blank page (this one measured 0.135)
-    colours = len(np.unique(img.reshape(-1, 3)[::7], axis=0))
-    assert colours > 2000  # photos and renders, not just text on a flat background
-    # the model renders show the milk carton's red print somewhere in the top half
+    saturated = (img.max(axis=2).astype(int) - img.min(axis=2) > 40).mean()
+    assert saturated > 0.03  # photos and renders, not just grey text on a flat background
+    # the model renders (above the fold) show the milk carton's red print (measured ~7000 px)
     top = img[:1500].reshape(-1, 3).astype(int)
-    red = ((top[:, 0] > 150) & (top[:, 1] < 80) & (top[:, 2] < 80)).sum()
-    assert red > 2000
+    red = ((top[:, 0] > 120) & (top[:, 0] > 2 * top[:, 1]) & (top[:, 0] > 2 * top[:, 2])).sum()
+    assert red > 3000
