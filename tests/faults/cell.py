@@ -1,0 +1,195 @@
+"""A simulated cell for fault injection: the real services as processes, an acquisition driven through the
+orchestrator's ``run`` key (as ``objscan scan`` does), and a fault injector that kills a service while it
+is serving a request and starts it again.
+
+"Mid-operation" is made exact: the injector waits until the orchestrator is in the given state (and view)
+*and* the victim's health says a request is inside one of its handlers, then SIGKILLs the victim's process
+group (no clean shutdown, no goodbye to the router), waits ``down_s`` and starts the same service again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import queue
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from common import keys
+from common.client import live_services, request_sync
+from common.codec import decode
+from common.errors import ObjscanError
+from common.launcher import ProcessSpec, ServiceGroup
+from common.messages import Health, Ok, Request
+from services.cli.cells import cell_specs
+
+ROBOT = keys.DEFAULT_ROBOT
+SCAN_CONFIG = {"object": "milk", "views": 3, "profile": "ideal", "seed": 0, "width": 640, "height": 480}
+
+
+def cell_processes(sessions: Path, registration_workers: int = 2) -> list[ProcessSpec]:
+    """Every service (sim backends) plus extra registration workers labelled ``registration-2``, ..."""
+    specs = cell_specs()
+    for spec in specs:
+        if spec.service == "orchestrator":
+            spec.args += ["--sessions", str(sessions)]
+    for k in range(2, registration_workers + 1):
+        specs.append(ProcessSpec("services.registration", [], service="registration", name=f"registration-{k}"))
+    return specs
+
+
+@dataclass
+class Fault:
+    """Kill ``label`` when the orchestrator is in ``state`` (and ``view``, if given) and the victim is busy."""
+
+    label: str
+    state: str
+    view: int | None = None
+    down_s: float = 2.0
+    busy_key_service: str | None = None  # service name whose health to watch (default: the label's)
+    fired_at: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def service(self) -> str:
+        return self.busy_key_service or self.label.split("-")[0]
+
+
+class FaultInjector(threading.Thread):
+    """Watches the orchestrator's status stream and fires each fault once, in order."""
+
+    def __init__(self, group: ServiceGroup, specs: dict[str, ProcessSpec], faults: list[Fault]):
+        super().__init__(daemon=True)
+        self.group = group
+        self.specs = specs
+        self.faults = list(faults)
+        self.status: queue.Queue[dict[str, Any]] = queue.Queue()
+        self.last: dict[str, Any] = {}
+        self.done = threading.Event()
+        self.errors: list[str] = []
+        self.fired: list[Fault] = []
+
+    def _instance_of(self, label: str) -> str | None:
+        """The liveliness instance of the process ``label`` (matched by pid-based instance ids)."""
+        pid = self.group.procs[label].pid
+        for _service, inst in live_services(self.group.session, timeout=0.5):
+            if inst.startswith(f"{pid}-"):
+                return inst
+        return None
+
+    def _busy(self, service: str, instance: str) -> int:
+        try:
+            h = request_sync(self.group.session, keys.health(service, instance), timeout=2.0)
+        except ObjscanError:
+            return 0
+        return h.busy - 1 if isinstance(h, Health) else 0  # minus this health query itself
+
+    def _fire(self, fault: Fault) -> None:
+        victims = [fault.label] if fault.label in self.group.procs else []
+        if fault.label == "registration*":  # whichever registration worker is busy
+            victims = [lbl for lbl in self.group.procs if lbl.startswith("registration")]
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not self.done.is_set():
+            for label in victims:
+                inst = self._instance_of(label)
+                if inst and self._busy(fault.service, inst) > 0:
+                    fault.fired_at = {"label": label, "instance": inst, "state": self.last.get("state"),
+                                      "view": self.last.get("view"), "t": time.time()}
+                    self.group.kill(label)
+                    time.sleep(fault.down_s)
+                    self.group.start(self.specs[label])
+                    self.fired.append(fault)
+                    return
+            time.sleep(0.05)
+        self.errors.append(f"{fault.label}: never busy in state {fault.state} (last status {self.last})")
+
+    def run(self) -> None:
+        pending = list(self.faults)
+        while not self.done.is_set():
+            try:
+                self.last = self.status.get(timeout=0.5)
+            except queue.Empty:
+                continue
+            if self.last.get("status") in ("done", "failed", "stopped"):
+                self.done.set()
+                break
+            if pending and self.last.get("state") == pending[0].state and (
+                    pending[0].view is None or self.last.get("view") == pending[0].view):
+                self._fire(pending.pop(0))
+        self.errors.extend(f"{f.label}: not fired (run ended)" for f in pending)
+
+
+def run_acquisition(group: ServiceGroup, out: Path, specs: dict[str, ProcessSpec], faults: list[Fault] | None = None,
+                    *, config: dict[str, Any] | None = None, timeout_s: float = 1800) -> tuple[dict[str, Any],
+                                                                                                 FaultInjector]:
+    """Start one acquisition through ``orchestrator/run`` and follow it to the end, injecting ``faults``."""
+    injector = FaultInjector(group, specs, faults or [])
+    final: dict[str, Any] = {}
+    finished = threading.Event()
+
+    def on_status(sample) -> None:  # noqa: ANN001 - zenoh thread
+        try:
+            msg = decode(sample.payload.to_bytes())
+        except ObjscanError:
+            return
+        if isinstance(msg, Ok):
+            injector.status.put(msg.info)
+            if msg.info.get("status") in ("done", "failed", "stopped"):
+                final.update(msg.info)
+                finished.set()
+
+    sub = group.session.declare_subscriber(keys.orchestrator(ROBOT, "status"), on_status)
+    injector.start()
+    try:
+        reply = request_sync(group.session, keys.orchestrator(ROBOT, "run"),
+                             Request(params={"out": str(out), "config": {**SCAN_CONFIG, **(config or {})}}),
+                             timeout=30)
+        assert isinstance(reply, Ok)
+        if not finished.wait(timeout_s):
+            final.update(request_sync(group.session, keys.orchestrator(ROBOT, "status"), timeout=10).info)
+            final.setdefault("status", "timeout")
+    finally:
+        injector.done.set()
+        injector.join(timeout=150)
+        sub.undeclare()
+    return final, injector
+
+
+@dataclass
+class SessionSummary:
+    views: int
+    frames_per_view: list[int]
+    frame_hashes: list[str]
+    captures: int
+    status: str
+
+    @property
+    def frames(self) -> int:
+        return sum(self.frames_per_view)
+
+
+def summarize(session: Path) -> SessionSummary:
+    """Views registered, complete frames per final view, and a hash of every frame's pixels."""
+    journal = json.loads((session / "journal.json").read_text())
+    views = sorted(d for d in session.glob("view_[0-9][0-9]") if (d / "view.json").is_file())
+    per_view, hashes = [], []
+    for v in views:
+        scans = sorted(s for s in v.glob("scan_*") if (s / "meta.json").is_file())
+        per_view.append(len(scans))
+        for s in scans:
+            hashes.append(hashlib.sha256((s / "color.png").read_bytes() + (s / "depth.png").read_bytes()).hexdigest())
+    return SessionSummary(views=len(views), frames_per_view=per_view, frame_hashes=hashes,
+                          captures=int(journal["counters"]["captures"]), status=journal["status"])
+
+
+def start_cell(root: Path, registration_workers: int = 2) -> tuple[ServiceGroup, dict[str, ProcessSpec]]:
+    group = ServiceGroup(log_dir=root / "logs")
+    specs = cell_processes(root / "sessions", registration_workers)
+    try:
+        group.launch(specs, timeout=300)
+    except BaseException:
+        group.stop_all()
+        raise
+    return group, {s.label(): s for s in specs}
