@@ -23,7 +23,7 @@ Two stages, as the issue asks (the paper's stated next step toward recognising o
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -93,9 +93,8 @@ def find(library: ModelLibrary, cloud: np.ndarray | PointCloud | str | Path, top
     entries = library.list()
     if not entries:
         return []
-    query_desc = describe(xyz, library.descriptor_config)
-    ranked = sorted(((view_distance(query_desc, library.descriptors(e.id)["views"], library.descriptor_config), e)
-                     for e in entries), key=lambda t: t[0])
+    cache: dict[tuple[int, ...], np.ndarray] = {}
+    ranked = sorted(((_descriptor_distance(library, xyz, e.id, cache), e) for e in entries), key=lambda t: t[0])
     query = _prepare(xyz, colors, cfg)
     out = []
     for rank, (dist, entry) in enumerate(ranked[:max(cfg.shortlist, 1)]):
@@ -108,6 +107,17 @@ def find(library: ModelLibrary, cloud: np.ndarray | PointCloud | str | Path, top
         out.append(Match(entry.id, figures.pop("score"), figures))
     out.sort(key=lambda m: -m.score)
     return out[:int(top_k)]
+
+
+def _descriptor_distance(library: ModelLibrary, xyz: np.ndarray, entry_id: str,
+                         cache: dict[tuple[int, ...], np.ndarray]) -> float:
+    """GOOD distance of the query to a model's synthetic views, at the resolutions that model was stored
+    with (a library opened with another ``DescriptorConfig`` still compares like with like)."""
+    stored = library.descriptors(entry_id)
+    cfg = replace(library.descriptor_config, n_bins=tuple(int(n) for n in np.atleast_1d(stored["n_bins"])))
+    if cfg.n_bins not in cache:
+        cache[cfg.n_bins] = describe(xyz, cfg)
+    return view_distance(cache[cfg.n_bins], stored["views"], cfg)
 
 
 def _query_arrays(cloud: np.ndarray | PointCloud | str | Path, rgb: np.ndarray | None
