@@ -123,7 +123,8 @@ class Acquisition:
         entry = {"t": round(time.time() - self.j["started"], 3), "state": self.j["state"], "view": self.j["view"],
                  "what": what, **{k: v for k, v in detail.items()}}
         self.j["decisions"].append(entry)
-        event(log, what, view=self.j["view"], **{k: v for k, v in detail.items() if not isinstance(v, (dict, list))})
+        fields = {"view": self.j["view"], **{k: v for k, v in detail.items() if not isinstance(v, (dict, list))}}
+        event(log, what, **fields)
 
     def status(self) -> dict[str, Any]:
         views_done = sum(1 for k in range(self.config.views) if self.store.has_view(k))
