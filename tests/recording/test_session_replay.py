@@ -146,3 +146,34 @@ def test_full_replay_reproduces_the_model_without_the_sim(recorded, tmp_path):
     assert report["camera"]["remaining"] == {keys.camera_capture(ROBOT): 0}  # every recorded frame was served
     _assert_same_model(report["comparison"])
     assert (out / "model.ply").is_file() and (out / "session.mcap").is_file()  # the replay is recorded too
+
+
+def test_foxglove_channels_decode_with_their_embedded_protobuf_schemas(recorded):
+    """What Foxglove does with the file: decode each visual channel from the schema stored in it."""
+    pytest.importorskip("mcap_protobuf", reason="mcap-protobuf-support not installed")
+    from mcap_protobuf.decoder import DecoderFactory
+
+    from common.session_folder import read_scan
+    from services.registration.cloud import read_ply
+
+    first: dict[str, object] = {}
+    last_model = None
+    with open(recorded / "session.mcap", "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for _s, channel, _m, decoded in reader.iter_decoded_messages(
+                topics=["/tf", "/model", "/camera/depth", "/camera/calibration", "/views/00/object"]):
+            first.setdefault(channel.topic, decoded)
+            if channel.topic == "/model":
+                last_model = decoded
+    tf = first["/tf"]
+    frames = [(t.parent_frame_id, t.child_frame_id) for t in tf.transforms]
+    assert frames == [("base", "gripper"), ("gripper", "camera")]
+    scan = read_scan(recorded, 0, 0)
+    depth = first["/camera/depth"]
+    assert (depth.width, depth.height, depth.encoding) == (scan.intrinsics.width, scan.intrinsics.height, "16UC1")
+    calib = first["/camera/calibration"]
+    assert list(calib.K)[0] == pytest.approx(scan.intrinsics.fx)
+    assert [x.name for x in last_model.fields] == ["x", "y", "z", "red", "green", "blue", "alpha"]
+    packed = np.frombuffer(last_model.data, dtype=[("xyz", "<f4", 3), ("rgba", "u1", 4)])
+    model = read_ply(recorded / "model.ply")
+    assert np.array_equal(packed["xyz"], model.xyz) and np.array_equal(packed["rgba"][:, :3], model.rgb)
