@@ -76,3 +76,14 @@ def test_every_service_killed_in_turn_acquisition_completes_like_a_clean_run(cle
 def test_one_service_killed(clean, tmp_path, fault):
     final, injector, summary = _acquire(tmp_path, [fault])
     _assert_like_clean(final, injector, summary, clean, tmp_path)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=False, reason=(
+    "the sim is the world: (1) the camera answers 'unavailable' while the twin is down and the orchestrator's "
+    "Cell does not retry a RemoteError with that code; (2) a restarted twin has no camera pose until the arm "
+    "moves, and its CLI object/profile/seed instead of the session's (docs/reliability.md)"))
+def test_sim_restart_mid_scan(clean, tmp_path):
+    """Honest expectation: completes only once the twin persists and reloads its world state."""
+    final, injector, summary = _acquire(tmp_path, [Fault("sim", "scan", view=0)])
+    _assert_like_clean(final, injector, summary, clean, tmp_path)
