@@ -36,7 +36,11 @@ def compare_models(recorded: PointCloud, replayed: PointCloud, tolerance_mm: flo
                            "tolerance_mm": float(tolerance_mm)}
     na, nb = recorded.normals, replayed.normals
     if not normals_same and na is not None and nb is not None and na.shape == nb.shape:
-        out["normals_max_diff"] = float(np.abs(np.asarray(na, np.float64) - np.asarray(nb, np.float64)).max())
+        per_point = np.abs(np.asarray(na, np.float64) - np.asarray(nb, np.float64)).max(axis=1)
+        out["normals_max_diff"] = float(per_point.max())
+        # a normal from an ill-conditioned neighbourhood (near-degenerate covariance) turns a last-bit
+        # difference into a visible one: say how many, not only the worst
+        out["normals_fraction_beyond_1e-5"] = float(np.mean(per_point > 1e-5))
     if identical:
         out.update(chamfer_mm=0.0, hausdorff_mm=0.0, within_tolerance=True)
         return out
