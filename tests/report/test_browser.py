@@ -14,8 +14,6 @@ import pytest
 from PIL import Image
 
 from services.report import build_report
-from tests.conftest import shared_data
-from tests.library.fake_session import build_fake_session
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (apt-get install -y chromium)")
@@ -30,10 +28,8 @@ def chromium(*args: str) -> subprocess.CompletedProcess:
 
 
 @pytest.fixture(scope="module")
-def report(tmp_path_factory):
-    shared_data("hope", "milk")
-    session = build_fake_session(tmp_path_factory.mktemp("br") / "milk", "milk", views=4, turn_deg=90.0)
-    return build_report(session)
+def report(milk_session, tmp_path_factory):
+    return build_report(milk_session, tmp_path_factory.mktemp("br") / "report.html")
 
 
 def test_every_image_decodes_in_the_browser(report, tmp_path):

@@ -19,8 +19,6 @@ import pytest
 from PIL import Image
 
 from services.report import ReportError, build_report
-from tests.conftest import shared_data
-from tests.library.fake_session import build_fake_session
 
 VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source", "track", "wbr"}
 
@@ -66,9 +64,8 @@ def parse(page: str) -> PageParser:
 
 
 @pytest.fixture(scope="module")
-def session(tmp_path_factory):
-    shared_data("hope", "milk")
-    return build_fake_session(tmp_path_factory.mktemp("rep") / "milk", "milk", views=4, turn_deg=90.0)
+def session(milk_session):
+    return milk_session
 
 
 @pytest.fixture(scope="module")
