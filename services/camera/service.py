@@ -26,7 +26,8 @@ class CameraService(Service):
         self.backend = opts.get("backend", "sim")
         config: dict[str, object] = {"backend": self.backend}
         if self.backend == "sim":
-            config.update(width=opts.get("width", 640), height=opts.get("height", 480))
+            # generous: the twin renders in ~60 ms, but a loaded 2-core machine can stall it for seconds
+            config.update(width=opts.get("width", 640), height=opts.get("height", 480), timeout_s=60.0)
         elif self.backend == "realsense":
             config.update(width=opts.get("width", 640), height=opts.get("height", 480))
             if opts.get("playback"):

@@ -18,6 +18,8 @@ COMMANDS = [
     "services.cli.cmd_scan",
     "services.cli.cmd_capture",
     "services.cli.cmd_reconstruct",
+    "services.cli.cmd_models",
+    "services.cli.cmd_report",
 ]
 
 

@@ -21,6 +21,7 @@ import logging
 import shutil
 import time
 from collections.abc import Callable
+from pathlib import Path
 from enum import StrEnum
 from typing import Any
 
@@ -88,8 +89,9 @@ class Acquisition:
     """One acquisition over a ``Cell``, persisted in a ``SessionStore``; ``run()`` drives it to the end."""
 
     def __init__(self, cell: Cell, store: SessionStore, config: AcquisitionConfig,
-                 on_status: Callable[[dict[str, Any]], None] | None = None):
+                 on_status: Callable[[dict[str, Any]], None] | None = None, library: Path | None = None):
         self.cell = cell
+        self.library = library
         self.store = store
         self.config = config
         self.on_status = on_status or (lambda _s: None)
@@ -315,7 +317,8 @@ class Acquisition:
         plan = await self.cell.plan_grasps(view.cloud, view.table, mode)
         self.store.save_json(f"view_{k:02d}/grasps_{mode}.json", {
             "mode": mode, "explanation": plan.explanation, "seconds": plan.seconds, "rejections": plan.rejections,
-            "grasps": [{"kind": g.kind, "rank": g.rank, "width": g.width, "metrics": g.metrics} for g in plan.grasps]})
+            "grasps": [{"kind": g.kind, "rank": g.rank, "width": g.width, "contacts": np.asarray(g.contacts).tolist(),
+                        "metrics": g.metrics} for g in plan.grasps]})
         self.decide("grasps planned", mode=mode, n=len(plan.grasps), explanation=plan.explanation)
         if not plan.grasps:
             if mode == "auto":
@@ -525,6 +528,15 @@ class Acquisition:
                        "decisions": self.j["decisions"],
                        "views": [self.store.load_json(f"view_{k:02d}/view.json").get("figures", {}) for k in range(n)]})
         self.store.save_json("report.json", report)
+        if self.library is not None:
+            try:
+                from services.library import add_session_model
+
+                entry = await asyncio.to_thread(add_session_model, self.library, self.store.path)
+                self.j["library_entry"] = entry
+                self.decide("model added to the library", entry=entry, library=str(self.library))
+            except Exception as exc:  # the session folder keeps the model: a library failure loses nothing
+                self.decide("could not add the model to the library", error=repr(exc)[:300])
         await self._park()
         return State.DONE
 

@@ -62,9 +62,12 @@ class OrchestratorService(Service):
                 raise InvalidRequest(f"{path} already holds a session; use resume or another folder")
             store = SessionStore(path)
             config = AcquisitionConfig.from_dict(params.get("config", {}))
+        # the finished model goes into the model library (docs/library.md) unless the run says ``library: null``
+        lib = params.get("library", self.settings.options.get("library", "models"))
+        library = Path(lib) if lib else None
         # session recording (docs/recording.md): on unless the run says ``record: false``
         self.current, run = recorded_acquisition(
-            lambda cell: Acquisition(cell, store, config, on_status=self._publish), self.request, path,
+            lambda cell: Acquisition(cell, store, config, on_status=self._publish, library=library), self.request, path,
             self.session, self.robot, enabled=params.get("record", True))
         self.task = self.spawn(run)
         return Ok(info={"session": str(path.resolve()), "resumed": self.current.resumed})
