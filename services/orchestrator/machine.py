@@ -21,8 +21,8 @@ import logging
 import shutil
 import time
 from collections.abc import Callable
-from pathlib import Path
 from enum import StrEnum
+from pathlib import Path
 from typing import Any
 
 import numpy as np
