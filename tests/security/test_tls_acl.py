@@ -18,10 +18,10 @@ import pytest
 import zenoh
 
 from common import keys
-from common.api import MoveRequest, MoveResult
+from common.api import CaptureRequest, MoveRequest, MoveResult
 from common.client import live_services, request_sync
 from common.errors import ServiceUnavailable
-from common.messages import Health, JointState, Request
+from common.messages import Health, JointState, Request, RGBDFrame
 from common.zenoh_config import ZenohSettings
 from services.cli.cmd_certs import make_ca, make_leaf
 from tests.security.tls_cell import TlsCell
@@ -38,7 +38,7 @@ def cell(tmp_path_factory):
     c = TlsCell(tmp_path_factory.mktemp("tls"))
     try:
         c.start_router()
-        c.launch(["sim", "arm"])
+        c.launch(["sim", "arm", "camera"])
         yield c
     finally:
         c.close()
@@ -190,3 +190,14 @@ def test_control_without_access_control_the_camera_moves_the_arm(tmp_path):
         assert np.allclose(_q(camera), target, atol=1e-3)
     finally:
         c.close()
+
+
+def test_policy_lets_the_cell_work_camera_renders_through_the_twin(cell, orchestrator):
+    """The policy is not only restrictive: the camera may still ask the twin to render (camera -> sim/render),
+    the arm may still drive the twin (arm -> sim/joints, exercised by every move above), and the
+    orchestrator gets the frame."""
+    frame = request_sync(orchestrator, keys.camera_capture(ROBOT), CaptureRequest(), timeout=60)
+    assert isinstance(frame, RGBDFrame) and frame.depth.size > 0
+    viewer = cell.open("viewer")
+    with pytest.raises(ServiceUnavailable):  # a viewer may not even ask for a frame
+        request_sync(viewer, keys.camera_capture(ROBOT), CaptureRequest(), timeout=2)
