@@ -48,6 +48,8 @@ def register(sub) -> None:  # noqa: ANN001
                    help="hardware backends when services must be started (default: %(default)s)")
     p.add_argument("--port", type=int, default=DEFAULT_ROUTER_PORT, help="router port of the cell")
     p.add_argument("--force-first-slip", action="store_true", help="sim: make the first grasp slip")
+    p.add_argument("--no-record", action="store_true", help="do not record the session to session.mcap")
+    p.add_argument("--library", help="model library folder the model is added to (default: the orchestrator's)")
     p.add_argument("--robot", default=keys.DEFAULT_ROBOT)
     p.set_defaults(func=run)
 
@@ -106,6 +108,9 @@ def run(args) -> int:  # noqa: ANN001
             params = {"out": str(session_dir), "config": {
                 "object": args.object, "views": args.views, "profile": args.profile, "seed": args.seed,
                 "width": args.width, "height": args.height, "force_first_slip": args.force_first_slip}}
+            params["record"] = not args.no_record
+            if args.library:
+                params["library"] = str(Path(args.library).resolve())
         reply = request_sync(session, keys.orchestrator(args.robot, "run"), Request(params=params), timeout=30)
         console.print(f"session: {reply.info['session']}" + (" (resumed)" if reply.info.get("resumed") else ""))
         stop_sent = False

@@ -20,6 +20,7 @@ COMMANDS = [
     "services.cli.cmd_reconstruct",
     "services.cli.cmd_models",
     "services.cli.cmd_report",
+    "services.cli.cmd_replay",
 ]
 
 
