@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import queue
 import threading
 import time
 from dataclasses import dataclass, field
@@ -62,67 +61,88 @@ class Fault:
 
 
 class FaultInjector(threading.Thread):
-    """Watches the orchestrator's status stream and fires each fault once, in order."""
+    """Fires each fault once, in order, as soon as its victim is seen busy in (or after) the fault's state.
+
+    ``last`` is the orchestrator's latest status, set from the status stream's callback, so the injector
+    always sees the current state; the victim's health is polled every few milliseconds, which catches
+    even short handlers (grasp planning takes ~0.3 s). A fault whose state passes without the victim
+    being seen busy stays armed for the next time the state comes round (``view`` is a lower bound).
+    """
 
     def __init__(self, group: ServiceGroup, specs: dict[str, ProcessSpec], faults: list[Fault]):
         super().__init__(daemon=True)
         self.group = group
         self.specs = specs
         self.faults = list(faults)
-        self.status: queue.Queue[dict[str, Any]] = queue.Queue()
         self.last: dict[str, Any] = {}
         self.done = threading.Event()
         self.errors: list[str] = []
         self.fired: list[Fault] = []
+        self._instances: dict[str, str] = {}
 
-    def _instance_of(self, label: str) -> str | None:
-        """The liveliness instance of the process ``label`` (matched by pid-based instance ids)."""
+    def _instance_of(self, label: str, timeout: float = 60.0) -> str | None:
+        """The liveliness instance of process ``label`` (instance ids start with the service's pid)."""
         pid = self.group.procs[label].pid
-        for _service, inst in live_services(self.group.session, timeout=0.5):
-            if inst.startswith(f"{pid}-"):
-                return inst
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            for _service, inst in live_services(self.group.session, timeout=0.5):
+                if inst.startswith(f"{pid}-"):
+                    return inst
+            time.sleep(0.1)
         return None
 
     def _busy(self, service: str, instance: str) -> int:
         try:
-            h = request_sync(self.group.session, keys.health(service, instance), timeout=2.0)
+            h = request_sync(self.group.session, keys.health(service, instance), timeout=1.0)
         except ObjscanError:
             return 0
         return h.busy - 1 if isinstance(h, Health) else 0  # minus this health query itself
 
-    def _fire(self, fault: Fault) -> None:
-        victims = [fault.label] if fault.label in self.group.procs else []
+    def _victims(self, fault: Fault) -> list[str]:
         if fault.label == "registration*":  # whichever registration worker is busy
-            victims = [lbl for lbl in self.group.procs if lbl.startswith("registration")]
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and not self.done.is_set():
-            for label in victims:
-                inst = self._instance_of(label)
-                if inst and self._busy(fault.service, inst) > 0:
-                    fault.fired_at = {"label": label, "instance": inst, "state": self.last.get("state"),
-                                      "view": self.last.get("view"), "t": time.time()}
-                    self.group.kill(label)
-                    time.sleep(fault.down_s)
-                    self.group.start(self.specs[label])
-                    self.fired.append(fault)
-                    return
-            time.sleep(0.05)
-        self.errors.append(f"{fault.label}: never busy in state {fault.state} (last status {self.last})")
+            return [lbl for lbl in self.group.procs if lbl.startswith("registration")]
+        return [fault.label]
+
+    def _armed(self, fault: Fault) -> bool:
+        st = self.last
+        return st.get("state") == fault.state and (fault.view is None or int(st.get("view", -1)) >= fault.view)
+
+    def _kill_and_restart(self, fault: Fault, label: str, instance: str) -> None:
+        fault.fired_at = {"label": label, "instance": instance, "state": self.last.get("state"),
+                          "view": self.last.get("view"), "t": time.time()}
+        self.group.kill(label)
+        time.sleep(fault.down_s)
+        self.group.start(self.specs[label])
+        self.fired.append(fault)
+        inst = self._instance_of(label)
+        if inst is None:
+            self.errors.append(f"{label} did not come back after the fault")
+        else:
+            self._instances[label] = inst
 
     def run(self) -> None:
+        for label in self.group.procs:
+            if label != "router":
+                inst = self._instance_of(label, timeout=10.0)
+                if inst:
+                    self._instances[label] = inst
         pending = list(self.faults)
-        while not self.done.is_set():
-            try:
-                self.last = self.status.get(timeout=0.5)
-            except queue.Empty:
-                continue
+        while not self.done.is_set() and pending:
             if self.last.get("status") in ("done", "failed", "stopped"):
-                self.done.set()
                 break
-            if pending and self.last.get("state") == pending[0].state and (
-                    pending[0].view is None or self.last.get("view") == pending[0].view):
-                self._fire(pending.pop(0))
-        self.errors.extend(f"{f.label}: not fired (run ended)" for f in pending)
+            fault = pending[0]
+            if not self._armed(fault):
+                time.sleep(0.02)
+                continue
+            for label in self._victims(fault):
+                inst = self._instances.get(label)
+                if inst and self._busy(fault.service, inst) > 0:
+                    self._kill_and_restart(fault, label, inst)
+                    pending.pop(0)
+                    break
+            else:
+                time.sleep(0.005)
+        self.errors.extend(f"{f.label}: not fired (run ended in {self.last.get('state')})" for f in pending)
 
 
 def run_acquisition(group: ServiceGroup, out: Path, specs: dict[str, ProcessSpec], faults: list[Fault] | None = None,
@@ -139,7 +159,7 @@ def run_acquisition(group: ServiceGroup, out: Path, specs: dict[str, ProcessSpec
         except ObjscanError:
             return
         if isinstance(msg, Ok):
-            injector.status.put(msg.info)
+            injector.last = msg.info
             if msg.info.get("status") in ("done", "failed", "stopped"):
                 final.update(msg.info)
                 finished.set()
