@@ -18,6 +18,10 @@ from common.api import StaticRequest, ViewResult
 from common.codec import Message
 from common.errors import InvalidRequest
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from services.registration.dynamic.pair import register_pair
+
+# registers PairJobMessage/PairResultMessage with the codec: a pair job is decoded before its handler runs
+from services.registration.pair_wire import pair_job_from_message, pair_result_message
 from services.registration.static.config import StaticConfig
 from services.registration.static.pipeline import register_view
 
@@ -49,8 +53,6 @@ class RegistrationService(Service):
         return view_result_message(msg.view, result)
 
     async def pair(self, msg: Message | None, ctx: QueryContext) -> Message:
-        from services.registration.dynamic.pair import register_pair
-        from services.registration.pair_wire import pair_job_from_message, pair_result_message
 
         job = pair_job_from_message(msg)
         result = await self.run_cpu(register_pair, job)
