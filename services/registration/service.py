@@ -40,6 +40,7 @@ class RegistrationService(Service):
 
     async def setup(self) -> None:
         self.jobs_done = {"static": 0, "pair": 0, "dynamic": 0}
+        self.coordinating = 0
         self.queryable(keys.REGISTRATION_STATIC, self.static)
         self.queryable(keys.registration_worker_pair(self.instance), self.pair)
         self.queryable(keys.REGISTRATION_DYNAMIC, self.dynamic)
@@ -62,12 +63,16 @@ class RegistrationService(Service):
     async def dynamic(self, msg: Message | None, ctx: QueryContext) -> Message:
         from services.registration.dynamic_face import build_model_distributed
 
-        result = await build_model_distributed(self, msg)
+        self.coordinating += 1
+        try:
+            result = await build_model_distributed(self, msg)
+        finally:
+            self.coordinating -= 1
         self.jobs_done["dynamic"] += 1
         return result
 
     def health_info(self) -> dict[str, object]:
-        return dict(self.jobs_done)
+        return {**self.jobs_done, "coordinating": self.coordinating}
 
 
 def main() -> None:
