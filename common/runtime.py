@@ -237,7 +237,8 @@ class Service:
             request_id.reset(token)
 
     async def _health(self, _msg: Message | None, _ctx: QueryContext) -> Message:
-        return Health(service=self.name, instance=self.instance, status="ok", busy=self._busy,
+        # busy: requests in progress other than this health query
+        return Health(service=self.name, instance=self.instance, status="ok", busy=max(self._busy - 1, 0),
                       uptime_s=time.monotonic() - self._started, info=_jsonable(self.health_info()))
 
     async def run(self) -> None:
