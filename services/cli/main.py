@@ -21,6 +21,7 @@ COMMANDS = [
     "services.cli.cmd_models",
     "services.cli.cmd_report",
     "services.cli.cmd_replay",
+    "services.cli.cmd_certs",
 ]
 
 

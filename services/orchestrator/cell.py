@@ -80,8 +80,12 @@ class Cell:
                 delay = min(delay * 2, 5.0)
                 continue
             except RemoteError as exc:
-                if exc.code != "shutdown" or time.monotonic() > deadline:
+                # the service answered but one it depends on is gone (e.g. the camera's twin restarting)
+                if exc.code not in ("shutdown", "unavailable", "timeout") or time.monotonic() > deadline:
                     raise
+                self.retries += 1
+                event(log, "a service behind the reply is unavailable; retrying", logging.WARNING, key=key,
+                      code=exc.code)
                 await asyncio.sleep(delay)
                 continue
             if self.tap is not None:

@@ -45,6 +45,9 @@ class SimService(Service):
     async def render(self, msg: Message | None, ctx: QueryContext) -> RGBDFrame:
         width = msg.width if isinstance(msg, CaptureRequest) and msg.width else 640
         height = msg.height if isinstance(msg, CaptureRequest) and msg.height else 480
+        if (width, height) not in ((640, 480), (848, 480)):
+            raise InvalidRequest("the twin renders the D435 presets 640x480 and 848x480",
+                                 detail={"width": width, "height": height})
         self.seq += 1
         return await self.run_cpu(self.world.render_frame, None, d435_intrinsics(width, height), self.seq)
 
@@ -97,10 +100,10 @@ class SimService(Service):
             self.world.force_next_grasp_slip()
             return Ok(info={"armed": True})
         if op == "turn":
-            achieved = self.world.turn_object(float(params.get("angle_deg", 30.0)))
+            achieved = self.world.turn_object(_number(params, "angle_deg", 30.0, -360.0, 360.0))
             return Ok(info={"achieved_turn_deg": achieved})
         if op == "gt_points":
-            n = int(params.get("n", 50000))
+            n = int(_number(params, "n", 50000, 1, 1_000_000))
             pts = self.world.obj.gt_points(n)
             T = self.world.true_object_pose()
             xyz = pts @ T[:3, :3].T + T[:3, 3]
@@ -111,6 +114,14 @@ class SimService(Service):
 
     def health_info(self) -> dict[str, object]:
         return {"object": self.world.obj.name, "profile": self.world.profile.name, "frames": self.seq}
+
+
+def _number(params: dict, name: str, default: float, lo: float, hi: float) -> float:
+    """A numeric request parameter, checked: a bad one is the caller's error, not the twin's."""
+    value = params.get(name, default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
+        raise InvalidRequest(f"{name} must be a number in [{lo}, {hi}]", detail={name: repr(value)[:40]})
+    return float(value)
 
 
 def main() -> None:

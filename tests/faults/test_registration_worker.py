@@ -3,7 +3,7 @@
 Found by the fault-injection tests: with two workers, the model stage failed with
 ``unknown message type 'PairJobMessage'`` because that type is registered only once a worker has imported
 ``services.registration.pair_wire`` (lazily, inside its handlers), while the runtime decodes the request
-before calling any handler. Fix (services/registration/service.py): import ``pair_wire`` at module level.
+before calling any handler. Fixed in services/registration/service.py: ``pair_wire`` is imported at module level.
 """
 
 from __future__ import annotations
@@ -26,8 +26,6 @@ def _job() -> PairJobMessage:
                           center=np.array([0.6, 0.0, 0.0]), axis=np.array([0.0, 0.0, 1.0]), prior=np.eye(4))
 
 
-@pytest.mark.xfail(reason="PairJobMessage is registered lazily in services/registration (reported to the lead)",
-                   strict=False)
 def test_fresh_worker_decodes_a_pair_job(service_group):
     service_group.launch([ProcessSpec("services.registration", [], service="registration")], timeout=120)
     (instance,) = [i for s, i in live_services(service_group.session) if s == "registration"]
