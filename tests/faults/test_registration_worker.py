@@ -9,7 +9,6 @@ before calling any handler. Fixed in services/registration/service.py: ``pair_wi
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from common.client import live_services
 from common.codec import decode
