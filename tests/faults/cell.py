@@ -96,7 +96,7 @@ class FaultInjector(threading.Thread):
             h = request_sync(self.group.session, keys.health(service, instance), timeout=1.0)
         except ObjscanError:
             return 0
-        return h.busy - 1 if isinstance(h, Health) else 0  # minus this health query itself
+        return h.busy if isinstance(h, Health) else 0  # Health.busy excludes the health query itself
 
     def _victims(self, fault: Fault) -> list[str]:
         if fault.label == "registration*":  # whichever registration worker is busy

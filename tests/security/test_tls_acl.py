@@ -60,10 +60,10 @@ def _arm_instance(session: zenoh.Session) -> str:
 
 
 def _arm_busy(session: zenoh.Session, instance: str) -> int:
-    """Requests in the arm's handlers right now, not counting this health query itself."""
+    """Requests in the arm's handlers right now (Health.busy does not count the health query itself)."""
     h = request_sync(session, keys.health("arm", instance), timeout=5)
     assert isinstance(h, Health)
-    return h.busy - 1
+    return h.busy
 
 
 def _move_req(q: np.ndarray) -> MoveRequest:
