@@ -46,6 +46,18 @@ def _interpret(key: str, replies: list[tuple[bool, bytes]], elapsed: float, time
     return msg
 
 
+def _collector(replies: list[tuple[bool, bytes]]):  # noqa: ANN202 - a zenoh reply callback
+    """A reply callback that copies each reply's payload out (ok or error) into ``replies``."""
+
+    def on_reply(reply: zenoh.Reply) -> None:
+        if reply.ok is not None:
+            replies.append((True, reply.ok.payload.to_bytes()))
+        else:
+            replies.append((False, reply.err.payload.to_bytes()))
+
+    return on_reply
+
+
 def _get_args(msg: Message | None, request_id: str | None) -> dict[str, Any]:
     args: dict[str, Any] = {"attachment": (request_id or _new_request_id()).encode()}
     if msg is not None:
@@ -62,11 +74,7 @@ async def request(session: zenoh.Session, key: str, msg: Message | None = None, 
     fut: asyncio.Future[None] = loop.create_future()
     replies: list[tuple[bool, bytes]] = []
 
-    def on_reply(reply: zenoh.Reply) -> None:
-        if reply.ok is not None:
-            replies.append((True, reply.ok.payload.to_bytes()))
-        else:
-            replies.append((False, reply.err.payload.to_bytes()))
+    on_reply = _collector(replies)
 
     def on_done() -> None:
         loop.call_soon_threadsafe(lambda: fut.done() or fut.set_result(None))
@@ -86,11 +94,7 @@ def request_sync(session: zenoh.Session, key: str, msg: Message | None = None, *
     done = threading.Event()
     replies: list[tuple[bool, bytes]] = []
 
-    def on_reply(reply: zenoh.Reply) -> None:
-        if reply.ok is not None:
-            replies.append((True, reply.ok.payload.to_bytes()))
-        else:
-            replies.append((False, reply.err.payload.to_bytes()))
+    on_reply = _collector(replies)
 
     start = time.monotonic()
     session.get(key, zenoh.handlers.Callback(on_reply, done.set), timeout=timeout, **_get_args(msg, request_id))

@@ -48,6 +48,7 @@ import numpy as np
 import open3d as o3d
 
 from common.messages import PointCloud
+from common.session_folder import json_default
 from services.library.descriptors import DescriptorConfig, check_xyz, model_descriptors
 from services.library.errors import BadModelInput, LibraryError, ModelNotFound
 from services.library.metadata import ModelMetadata, slug
@@ -167,7 +168,7 @@ class ModelLibrary:
                     files[MESH_FILE] = _write_mesh(stage / MESH_FILE, mesh_obj)
                 self._fault("files_written")
                 record = {"id": entry_id, "points": len(pcd.points), "files": files, "metadata": meta.to_dict()}
-                _write_synced(stage / METADATA_FILE, json.dumps(record, indent=2, default=_json_default).encode())
+                _write_synced(stage / METADATA_FILE, json.dumps(record, indent=2, default=json_default).encode())
                 _fsync_dir(stage)
                 self._fault("metadata_written")
                 os.rename(stage, final)
@@ -401,7 +402,7 @@ def _row(record: dict[str, Any]) -> tuple:
     meta = record["metadata"]
     return (record["id"], meta["object_name"], float(meta["created"]), meta.get("session"),
             meta.get("configuration"), int(record["points"]), int(MESH_FILE in record["files"]),
-            json.dumps(meta, default=_json_default))
+            json.dumps(meta, default=json_default))
 
 
 def _complete_record(folder: Path) -> dict[str, Any] | None:
@@ -507,11 +508,4 @@ def _load_mesh(mesh: str | Path | o3d.geometry.TriangleMesh) -> o3d.geometry.Tri
     return m
 
 
-def _json_default(o: Any) -> Any:
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
