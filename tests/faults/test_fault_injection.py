@@ -66,6 +66,7 @@ def test_every_service_killed_in_turn_acquisition_completes_like_a_clean_run(cle
 
 
 @pytest.mark.slow
+@pytest.mark.extended  # each is a whole acquisition; the all-services case above covers them in CI
 @pytest.mark.parametrize("fault", [
     Fault("camera", "scan", view=1),
     Fault("arm", "scan", view=1),
@@ -80,6 +81,7 @@ def test_one_service_killed(clean, tmp_path, fault):
 
 
 @pytest.mark.slow
+@pytest.mark.extended
 @pytest.mark.xfail(strict=False, reason=(
     "the sim is the world: (1) the camera answers 'unavailable' while the twin is down and the orchestrator's "
     "Cell does not retry a RemoteError with that code; (2) a restarted twin has no camera pose until the arm "
