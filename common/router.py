@@ -24,19 +24,24 @@ def router_config(listen: list[str]) -> zenoh.Config:
     return conf
 
 
-def main(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description="objscan's embedded Zenoh router")
-    p.add_argument("--listen", default=DEFAULT_CONNECT, help="comma-separated endpoints (default %(default)s)")
-    args = p.parse_args(argv)
+def serve(conf: zenoh.Config, banner: str) -> None:
+    """Run a router with ``conf`` until SIGINT/SIGTERM, then close its session."""
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    session = zenoh.open(router_config([e for e in args.listen.split(",") if e]))
-    print(f"zenoh router listening on {args.listen}", flush=True)
+    session = zenoh.open(conf)
+    print(banner, flush=True)
     try:
         stop.wait()
     finally:
         session.close()
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description="objscan's embedded Zenoh router")
+    p.add_argument("--listen", default=DEFAULT_CONNECT, help="comma-separated endpoints (default %(default)s)")
+    args = p.parse_args(argv)
+    serve(router_config([e for e in args.listen.split(",") if e]), f"zenoh router listening on {args.listen}")
 
 
 if __name__ == "__main__":

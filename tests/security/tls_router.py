@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import signal
-import threading
 from pathlib import Path
 
 import zenoh
+
+from common.router import serve
 
 REPO = Path(__file__).resolve().parents[2]
 ROUTER_CONFIG = REPO / "deploy" / "zenoh-router-tls.json5"
@@ -35,16 +35,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--listen", required=True, help="comma-separated tls/ endpoints")
     p.add_argument("--config", default=str(ROUTER_CONFIG))
     args = p.parse_args(argv)
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    session = zenoh.open(tls_router_config(Path(args.certs), [e for e in args.listen.split(",") if e],
-                                           Path(args.config)))
-    print(f"zenoh TLS router listening on {args.listen}", flush=True)
-    try:
-        stop.wait()
-    finally:
-        session.close()
+    serve(tls_router_config(Path(args.certs), [e for e in args.listen.split(",") if e], Path(args.config)),
+          f"zenoh TLS router listening on {args.listen}")
 
 
 if __name__ == "__main__":
