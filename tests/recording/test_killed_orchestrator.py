@@ -34,6 +34,7 @@ def _status(group: ServiceGroup) -> dict:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(2400)  # two partial acquisitions on a 2-core machine: well over the default 600 s
 def test_killed_orchestrator_recording_is_readable_and_resume_appends_a_part(tmp_path):
     session = tmp_path / "session"
     with ServiceGroup(log_dir=tmp_path / "logs", robot=ROBOT) as group:
