@@ -5,7 +5,10 @@ this, so the same machine drives the simulated cell, the real one or a replay.
 
 Every call is idempotent (a move to a pose, a capture, a registration of given frames), so when a service
 is gone — killed, restarting, its machine rebooting — the call waits for it to come back (up to
-``retry_window_s``) and is sent again. ``tap`` sees every request and reply (the session recorder).
+``retry_window_s``) and is sent again. The same holds when the service answers but one *it* depends on is
+gone (``RemoteError`` with code ``unavailable``/``timeout``/``shutdown``: the camera while the twin it
+renders through restarts); a capture that failed saved nothing, so sending it again cannot duplicate a
+frame (the machine writes a frame only from a reply). ``tap`` sees every request and reply (the session recorder).
 """
 
 from __future__ import annotations
@@ -87,6 +90,7 @@ class Cell:
                 event(log, "a service behind the reply is unavailable; retrying", logging.WARNING, key=key,
                       code=exc.code)
                 await asyncio.sleep(delay)
+                delay = min(delay * 2, 5.0)
                 continue
             if self.tap is not None:
                 self.tap(key, msg, reply, t0, time.time())

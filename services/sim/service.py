@@ -8,11 +8,17 @@
   why); opening sets a held object down with the profile's errors.
 - ``sim/world`` (``Request``, ``params.op``): ``state``, ``reset`` (object, profile, seed), ``force_slip``,
   ``turn`` (by hand), ``gt_points`` (ground-truth surface samples in ``base``). Ground truth only.
+
+The world survives the twin: every change is written to a state file before the reply goes out (joint
+set-points, which stream at up to 100 Hz, at most ``JOINTS_SAVE_DELAY_S`` later, and always before the
+next frame is rendered), and a restarted twin loads it (services/sim/state_file.py: where, and how to
+start fresh). The arm's twin link re-sends its joints when the twin comes back.
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
 
 import numpy as np
 
@@ -20,10 +26,17 @@ from common import keys
 from common.api import CaptureRequest, GripperRequest, GripperResult
 from common.codec import Message
 from common.errors import InvalidRequest
+from common.log import event
 from common.messages import JointState, Ok, Request, RGBDFrame
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
 from services.sim.sensor_model import d435_intrinsics
+from services.sim.state_file import StateFile, resolve_state_path
 from services.sim.world import World, default_object_pose
+
+log = logging.getLogger("objscan.sim")
+
+#: Joint set-points are saved at most this long after they arrive (a render saves them at once).
+JOINTS_SAVE_DELAY_S = 0.2
 
 
 class SimService(Service):
@@ -31,10 +44,28 @@ class SimService(Service):
 
     async def setup(self) -> None:
         opts = self.settings.options
-        self.world = await self.run_cpu(World, opts.get("object", "milk"), profile=opts.get("profile", "ideal"),
-                                        seed=int(opts.get("seed", 0)))
-        self.seq = 0
-        self.last_joints: JointState | None = None
+        z = self.settings.zenoh
+        path = resolve_state_path(opts.get("state_file"), self.robot, list(z.connect), list(z.listen))
+        self.state_file = StateFile(path) if path is not None else None
+        self.restored = False
+        self.state_error = ""
+        self._joints_dirty = False
+        self._joints_flush: asyncio.Task | None = None
+        self._clean_stop = False
+        doc = None
+        if self.state_file is not None and not opts.get("fresh"):
+            doc = await self.run_cpu(self.state_file.load)  # a broken file stops the start (typed error)
+        if doc is not None:
+            self.world = await self.run_cpu(World.from_snapshot, doc["world"])
+            self.seq = int(doc.get("seq", 0))
+            self.restored = True
+            event(log, "world restored from the state file", path=str(path), object=self.world.obj.name,
+                  frames=self.seq, attached=self.world.attached)
+        else:
+            self.world = await self.run_cpu(World, opts.get("object", "milk"), profile=opts.get("profile", "ideal"),
+                                            seed=int(opts.get("seed", 0)))
+            self.seq = 0
+        self._persist()
         self._world_lock = asyncio.Lock()
         r = self.robot
         self.queryable(keys.sim(r, "render"), self.render)
@@ -49,14 +80,16 @@ class SimService(Service):
             raise InvalidRequest("the twin renders the D435 presets 640x480 and 848x480",
                                  detail={"width": width, "height": height})
         self.seq += 1
-        return await self.run_cpu(self.world.render_frame, None, d435_intrinsics(width, height), self.seq)
+        frame = await self.run_cpu(self.world.render_frame, None, d435_intrinsics(width, height), self.seq)
+        self._persist()  # the frame counter keys the next frame's noise: a restart must not repeat a frame
+        return frame
 
     async def joints(self, msg: Message | None, ctx: QueryContext) -> Ok:
         if not isinstance(msg, JointState):
             raise InvalidRequest("expected a JointState", detail={"got": type(msg).__name__})
         self.world.set_joint_state(msg.names, msg.position, T_base_gripper=msg.T_base_gripper,
                                    T_base_camera=msg.T_base_camera)
-        self.last_joints = msg
+        self._joints_changed()
         return Ok()
 
     async def gripper(self, msg: Message | None, ctx: QueryContext) -> GripperResult:
@@ -67,10 +100,12 @@ class SimService(Service):
             if w.T_base_gripper is None:
                 raise InvalidRequest("no TCP pose reported yet: move the arm before closing the gripper")
             outcome = await self.run_cpu(w.close_gripper, w.T_base_gripper, msg.opening)
+            self._persist()
             return GripperResult(opening=float(outcome.width), holding=bool(outcome.success), reason=outcome.reason)
         if w.attached and msg.opening <= w.gripper_opening + 1e-4:
             return GripperResult(opening=float(w.gripper_opening), holding=True, reason="already_holding")
         released = await self.run_cpu(w.open_gripper, msg.opening)
+        self._persist()
         return GripperResult(opening=float(w.gripper_opening), holding=False,
                              reason="released" if released else "opened")
 
@@ -89,18 +124,20 @@ class SimService(Service):
                 if "x" in params or "y" in params or "yaw_deg" in params:
                     pose = default_object_pose(float(params.get("x", 0.6)), float(params.get("y", 0.0)),
                                                float(params.get("yaw_deg", 0.0)))
-                self.world = await self.run_cpu(lambda: World(obj, profile=profile, seed=seed, object_pose=pose))
-                self.seq = 0
-                if self.last_joints is not None:  # the arm has not moved: the new world knows where it is
-                    j = self.last_joints
-                    self.world.set_joint_state(j.names, j.position, T_base_gripper=j.T_base_gripper,
-                                               T_base_camera=j.T_base_camera)
+                new = await self.run_cpu(lambda: World(obj, profile=profile, seed=seed, object_pose=pose))
+                if w.joint_names:  # the arm has not moved: the new world knows where it is
+                    new.set_joint_state(w.joint_names, w.joint_positions, T_base_gripper=w.T_base_gripper,
+                                        T_base_camera=w.T_base_camera)
+                self.world, self.seq = new, 0
+                self._persist()
             return Ok(info=self.world.state())
         if op == "force_slip":
             self.world.force_next_grasp_slip()
+            self._persist()
             return Ok(info={"armed": True})
         if op == "turn":
             achieved = self.world.turn_object(_number(params, "angle_deg", 30.0, -360.0, 360.0))
+            self._persist()
             return Ok(info={"achieved_turn_deg": achieved})
         if op == "gt_points":
             n = int(_number(params, "n", 50000, 1, 1_000_000))
@@ -112,8 +149,51 @@ class SimService(Service):
         raise InvalidRequest(f"unknown sim world op {op!r}",
                              detail={"ops": ["state", "reset", "force_slip", "turn", "gt_points"]})
 
+    # ------------------------------------------------------------------------------ state file
+    def _persist(self) -> None:
+        """Write the world now (on the loop thread, so saves happen in order and the last one is newest).
+
+        A failed write is logged and shown in health, not raised: the twin keeps serving, it just would not
+        survive a crash."""
+        self._joints_dirty = False
+        if self.state_file is None:
+            return
+        try:
+            self.state_file.save(self.world.snapshot(), seq=self.seq, robot=self.robot)
+            self.state_error = ""
+        except OSError as exc:
+            if not self.state_error:
+                event(log, "could not save the world state", logging.ERROR, path=str(self.state_file.path),
+                      error=str(exc))
+            self.state_error = str(exc)
+
+    def _joints_changed(self) -> None:
+        """Set-points stream fast: save once they pause for ``JOINTS_SAVE_DELAY_S`` (or with the next event)."""
+        self._joints_dirty = True
+        if self.state_file is not None and (self._joints_flush is None or self._joints_flush.done()):
+            self._joints_flush = self.spawn(self._flush_joints_later())
+
+    async def _flush_joints_later(self) -> None:
+        await asyncio.sleep(JOINTS_SAVE_DELAY_S)
+        if self._joints_dirty:
+            self._persist()
+
+    def stop(self) -> None:
+        self._clean_stop = True
+        super().stop()
+
+    async def teardown(self) -> None:
+        # a clean stop ends the world (the next start is fresh); a killed twin never gets here
+        if self._clean_stop and self.state_file is not None:
+            self.state_file.discard()
+
     def health_info(self) -> dict[str, object]:
-        return {"object": self.world.obj.name, "profile": self.world.profile.name, "frames": self.seq}
+        info: dict[str, object] = {"object": self.world.obj.name, "profile": self.world.profile.name,
+                                   "frames": self.seq, "restored": self.restored,
+                                   "state_file": None if self.state_file is None else str(self.state_file.path)}
+        if self.state_error:
+            info["state_error"] = self.state_error
+        return info
 
 
 def _number(params: dict, name: str, default: float, lo: float, hi: float) -> float:
@@ -129,6 +209,12 @@ def main() -> None:
     p.add_argument("--object", default="milk", help="HOPE object name or a mesh path (default: %(default)s)")
     p.add_argument("--profile", default="ideal", help="error profile: ideal | hand-turned | robot-turned")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--state-file", default=None,
+                   help="where the world is kept across restarts ('none': nowhere; default: env "
+                        "OBJSCAN_SIM_STATE_FILE, else $OBJSCAN_STATE_DIR/sim-ROBOT-NETWORK.json; see docs/sim.md)")
+    p.add_argument("--fresh", action="store_true",
+                   help="ignore a saved world and start from --object/--profile/--seed (overwrites the file)")
     args = p.parse_args()
     run_service(lambda: SimService(settings_from_args(args, object=args.object, profile=args.profile,
-                                                      seed=args.seed)))
+                                                      seed=args.seed, state_file=args.state_file,
+                                                      fresh=args.fresh)))

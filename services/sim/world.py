@@ -8,7 +8,9 @@ real-world errors. Ground truth (true camera and object poses) only leaves in ``
 
 Randomness is split into streams keyed by (seed, kind, index) - a frame's noise by its sequence number and
 pose, a grasp's by the grasp count - so re-rendering a frame or replaying a session after a restart gives
-the same result regardless of what else was asked in between.
+the same result regardless of what else was asked in between. That is also why ``snapshot`` /
+``World.from_snapshot`` can carry a world across a process restart exactly: the counters are the whole RNG
+state, so a restored world draws what the original would have drawn next (services/sim/state_file.py).
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import numpy as np
 
 from common.geometry import invert, make_transform, rotation_about_axis
 from common.messages import Intrinsics, RGBDFrame
-from services.sim.catalogue import SimObject, load_object
+from services.sim.catalogue import SimObject, load_object, resolve_object
 from services.sim.errors import SimError, SimInputError, check_transform
 from services.sim.gripper import GraspChecker, GraspOutcome, GripperSpec
 from services.sim.profiles import ErrorProfile, get_profile
@@ -32,6 +34,8 @@ from services.sim.sensor_model import d435_intrinsics
 DEFAULT_OBJECT_XY = (0.50, 0.0)
 _STREAM_SESSION, _STREAM_FRAME, _STREAM_GRASP, _STREAM_PLACE, _STREAM_TURN = range(5)
 _CONTACT_SAMPLES = 40000
+#: Version of ``World.snapshot``'s layout; ``from_snapshot`` refuses any other.
+SNAPSHOT_FORMAT = 1
 
 
 class SimStateError(SimError):
@@ -337,3 +341,100 @@ class World:
                     "last_set_down": dict(self.last_set_down),
                 },
             }
+
+    # -- persistence ------------------------------------------------------------------------------------
+    def snapshot(self) -> dict:
+        """Everything that makes this world what it is now, JSON-able and exact (floats round-trip).
+
+        The object is stored by where its mesh comes from (``object_model``), the profile by name; the
+        table and gripper are the defaults (a world built with other specs is restored with the defaults).
+        The counters are stored, so the restored world's random draws continue where these left off.
+        """
+        with self._lock:
+            def m(T):
+                return None if T is None else np.asarray(T, dtype=np.float64).tolist()
+            return {
+                "format": SNAPSHOT_FORMAT,
+                "object_model": self.object_model(),
+                "profile": self.profile.name,
+                "seed": self.seed,
+                "initial_pose": m(self._initial_pose),
+                "T_base_object": m(self.T_base_object),
+                "attached": bool(self.attached),
+                "T_gripper_object": m(self.T_gripper_object),
+                "yaw_at_grasp": float(self._yaw_at_grasp),
+                "gripper_opening": float(self.gripper_opening),
+                "joint_names": list(self.joint_names),
+                "joint_positions": self.joint_positions.tolist(),
+                "T_base_gripper": m(self.T_base_gripper),
+                "T_base_camera": m(self.T_base_camera),
+                "force_slip": bool(self._force_slip),
+                "counts": {k: int(v) for k, v in self.counts.items()},
+                "last_set_down": _plain(self.last_set_down),
+                "hand_eye_error": m(self.hand_eye_error),
+                "turn_gain": float(self.turn_gain),
+            }
+
+    @classmethod
+    def from_snapshot(cls, snap: dict) -> World:
+        """The world ``snapshot()`` described: same object, profile, seed, poses, grasp, counters.
+
+        Raises ``SimStateError`` (code ``bad_snapshot``) when the snapshot is not one this version wrote
+        or its object can no longer be loaded; a bad pose inside it raises ``SimInputError``.
+        """
+        if not isinstance(snap, dict) or snap.get("format") != SNAPSHOT_FORMAT:
+            got = snap.get("format") if isinstance(snap, dict) else type(snap).__name__
+            raise SimStateError(f"not a world snapshot of format {SNAPSHOT_FORMAT} (got {got!r})",
+                                code="bad_snapshot")
+        try:
+            model = snap["object_model"]
+            world = cls(_object_from_model(model), profile=str(snap["profile"]), seed=int(snap["seed"]),
+                        object_pose=np.asarray(snap["initial_pose"], dtype=np.float64))
+            with world._lock:
+                world.T_base_object = check_transform(snap["T_base_object"], "T_base_object")
+                world.attached = bool(snap["attached"])
+                Tgo = snap["T_gripper_object"]
+                world.T_gripper_object = None if Tgo is None else check_transform(Tgo, "T_gripper_object")
+                if world.attached and world.T_gripper_object is None:
+                    raise SimInputError("a held object needs T_gripper_object", code="bad_value")
+                world._yaw_at_grasp = float(snap["yaw_at_grasp"])
+                world.gripper_opening = float(snap["gripper_opening"])
+                world.joint_names = [str(n) for n in snap["joint_names"]]
+                world.joint_positions = np.asarray(snap["joint_positions"], dtype=np.float64).reshape(-1)
+                for name in ("T_base_gripper", "T_base_camera"):
+                    T = snap[name]
+                    setattr(world, name, None if T is None else check_transform(T, name))
+                world._force_slip = bool(snap["force_slip"])
+                world.counts.update({str(k): int(v) for k, v in snap["counts"].items()})
+                world.last_set_down = dict(snap["last_set_down"])
+                world.hand_eye_error = check_transform(snap["hand_eye_error"], "hand_eye_error")
+                world.turn_gain = float(snap["turn_gain"])
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise SimStateError(f"world snapshot is incomplete or malformed: {type(exc).__name__}: {exc}",
+                                code="bad_snapshot") from None
+        return world
+
+
+def _object_from_model(model: dict) -> SimObject:
+    """Load the object an ``object_model`` names: by its HOPE name when that still resolves to the same
+    mesh (so its name is kept), else from the mesh file."""
+    name, source = str(model["name"]), model.get("source")
+    scale, up_axis = model.get("scale"), model.get("up_axis")
+    try:
+        _, path, _ = resolve_object(name)
+        by_name = source is None or str(path) == str(source)
+    except SimError:
+        by_name = source is None
+    obj = load_object(name if by_name else str(source), scale=scale, up_axis=up_axis)
+    obj.name = name
+    return obj
+
+
+def _plain(obj):  # noqa: ANN001, ANN202 - JSON-able copy of a small nested dict of numbers/lists
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, np.ndarray)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
