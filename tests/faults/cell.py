@@ -215,7 +215,8 @@ def _frame_hash(scan: Path) -> str:
 
 
 def start_cell(root: Path, registration_workers: int = 2) -> tuple[ServiceGroup, dict[str, ProcessSpec]]:
-    group = ServiceGroup(log_dir=root / "logs")
+    # the twin's state file (services/sim/state_file.py) in the test's folder, not the user's state dir
+    group = ServiceGroup(log_dir=root / "logs", extra_env={"OBJSCAN_STATE_DIR": str(root / "state")})
     specs = cell_processes(root / "sessions", registration_workers)
     try:
         group.launch(specs, timeout=300)
