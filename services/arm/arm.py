@@ -21,7 +21,7 @@ import pinocchio as pin
 
 from services.arm.collision import CollisionConfig, CollisionWorld
 from services.arm.drivers.base import ArmDriver, execute
-from services.arm.errors import ArmError, DriverError, MotionStopped
+from services.arm.errors import ArmError, BadCommand, DriverError, MotionStopped
 from services.arm.kinematics import Kinematics, KinematicsConfig, check_transform
 from services.arm.motion import (
     JointTrajectory,
@@ -138,22 +138,30 @@ class ArmController:
         q_goal = self.safety.check_joints(q)
         return plan_joint_motion(self._current_q(), q_goal, self.config.limits, speed_scale)
 
+    def _start_q(self, q_start: np.ndarray | None) -> np.ndarray:
+        """Where a motion starts: the arm's configuration, or (dry runs only) a given one inside the limits."""
+        if q_start is None:
+            return self._current_q()
+        return self.safety.check_joints(q_start).copy()
+
     def plan_pose(
-        self, T_base_frame: np.ndarray, speed_scale: float = 1.0, free_roll: bool = False, frame: str = "gripper"
+        self, T_base_frame: np.ndarray, speed_scale: float = 1.0, free_roll: bool = False, frame: str = "gripper",
+        q_start: np.ndarray | None = None,
     ) -> tuple[JointTrajectory, float]:
-        """Joint-space motion to a pose (IK from the current configuration); returns (trajectory, roll)."""
+        """Joint-space motion to a pose (IK from the start configuration); returns (trajectory, roll)."""
         T = check_transform(T_base_frame, "target pose")
-        q0 = self._current_q()
+        q0 = self._start_q(q_start)
         sol = self.kinematics.ik(T, q0, frame=frame, free_roll=free_roll)
         self.safety.check_joints(sol.q)
         return plan_joint_motion(q0, sol.q, self.config.limits, speed_scale), sol.roll
 
     def plan_linear(
-        self, T_base_frame: np.ndarray, speed_scale: float = 1.0, frame: str = "gripper"
+        self, T_base_frame: np.ndarray, speed_scale: float = 1.0, frame: str = "gripper",
+        q_start: np.ndarray | None = None,
     ) -> JointTrajectory:
         T = check_transform(T_base_frame, "target pose")
         return plan_linear_motion(
-            self.kinematics, self._current_q(), T, self.config.limits, speed_scale, frame, self.config.line
+            self.kinematics, self._start_q(q_start), T, self.config.limits, speed_scale, frame, self.config.line
         )
 
     def check(self, trajectory: JointTrajectory, allow_object_contact: bool = False) -> dict:
@@ -164,8 +172,10 @@ class ArmController:
 
     # ------------------------------------------------------------------ moves
     def _run(self, trajectory: JointTrajectory, allow_object_contact: bool, dry_run: bool) -> dict:
-        info = {"duration_s": float(trajectory.duration), **self.check(trajectory, allow_object_contact)}
+        info = {"duration_s": float(trajectory.duration), **self.check(trajectory, allow_object_contact),
+                "q_end": np.asarray(trajectory.q_end, dtype=np.float64).copy()}
         if dry_run:
+            info["frames_end"] = self.kinematics.fk_frames(info["q_end"])  # still inside the motion lock
             return info
         if self._estopped:
             raise MotionStopped("emergency stop is latched; reset it before moving", code="estop_latched")
@@ -216,12 +226,19 @@ class ArmController:
         frame: str = "gripper",
         allow_object_contact: bool = False,
         dry_run: bool = False,
+        q_start: np.ndarray | None = None,
     ) -> dict:
-        """Joint-space motion putting ``frame`` (TCP by default) at a pose; ``roll`` in the reply when free."""
+        """Joint-space motion putting ``frame`` (TCP by default) at a pose; ``roll`` in the reply when free.
+
+        ``q_start`` (dry runs only) plans and checks the motion as if the arm stood there: a caller can check
+        a whole chain of moves (pick, turn, place) before the first one runs. ``q_end`` in the reply is the
+        configuration the motion ends in.
+        """
+        self._dry_start(q_start, dry_run)
         if frame == "gripper":
             self.safety.check_tcp(T_base_gripper)
         with self._exclusive():
-            traj, roll = self.plan_pose(T_base_gripper, speed_scale, free_roll, frame)
+            traj, roll = self.plan_pose(T_base_gripper, speed_scale, free_roll, frame, q_start)
             info = self._run(traj, allow_object_contact, dry_run)
             info["roll"] = roll
             return info
@@ -233,12 +250,20 @@ class ArmController:
         frame: str = "gripper",
         allow_object_contact: bool = False,
         dry_run: bool = False,
+        q_start: np.ndarray | None = None,
     ) -> dict:
-        """Straight-line TCP motion (approach, lift, set down, retreat)."""
+        """Straight-line TCP motion (approach, lift, set down, retreat); ``q_start`` as in ``move_pose``."""
+        self._dry_start(q_start, dry_run)
         if frame == "gripper":
             self.safety.check_tcp(T_base_gripper)
         with self._exclusive():
-            return self._run(self.plan_linear(T_base_gripper, speed_scale, frame), allow_object_contact, dry_run)
+            return self._run(self.plan_linear(T_base_gripper, speed_scale, frame, q_start), allow_object_contact,
+                             dry_run)
+
+    @staticmethod
+    def _dry_start(q_start: np.ndarray | None, dry_run: bool) -> None:
+        if q_start is not None and not dry_run:
+            raise BadCommand("a start configuration is only allowed on a dry run", code="bad_value")
 
     def gripper(self, opening: float, force: float | None = None) -> dict:
         """Drive the fingers to ``opening`` (m) with at most ``force`` (N); blocks until reached or stalled.

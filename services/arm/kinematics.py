@@ -55,6 +55,9 @@ class KinematicsConfig:
     ik_max_step: float = 0.4  # rad per iteration, keeps DLS from overshooting far from the target
     ik_num_seeds: int = 24  # including the caller's q and the fixed postures
     ik_max_solutions: int = 3  # converged solutions to compare before choosing the closest to q_init
+    # the q_init seed's solution is taken at once only when no joint moves more than this (rad): DLS from a
+    # far-away q_init can converge on another branch (measured: a 4.4 rad wrist swing chosen over 2.8 rad)
+    ik_near_jump: float = 0.5
     ik_random_seed: int = 7
     roll_gain: float = 0.5  # null-space pull of the free roll towards 0 (free_roll only)
     fixed_seeds: tuple[tuple[float, ...], ...] = field(
@@ -89,6 +92,20 @@ def _check_q(q: np.ndarray, n: int) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise BadCommand("joint vector contains NaN or inf", code="bad_value")
     return arr
+
+
+def wrist_flip(q: np.ndarray) -> np.ndarray:
+    """The other wrist solution of the same TCP pose: joint 4 and 6 turned by pi, joint 5 mirrored.
+
+    PAPRAS's joints 4-5-6 are a roll-pitch-roll wrist, so Rz(a)Ry(b)Rz(c) = Rz(a+pi)Ry(-b)Rz(c+pi) gives the
+    same flange pose (verified against FK in tests/arm/test_kinematics.py). Angles are wrapped to (-pi, pi].
+    """
+    out = np.asarray(q, dtype=np.float64).copy()
+    out[3] += np.pi
+    out[4] = -out[4]
+    out[5] += np.pi
+    out[[3, 5]] = (out[[3, 5]] + np.pi) % (2 * np.pi) - np.pi
+    return out
 
 
 def check_transform(T: np.ndarray, name: str = "pose") -> np.ndarray:
@@ -316,7 +333,8 @@ class Kinematics:
         to ``ik_max_solutions`` converged seeds, returns the one closest to ``q_init``. With
         ``free_roll=True`` the rotation about the frame's x-axis (the gripper's approach axis) is free;
         the solution's ``roll`` is the angle used: ``T_achieved = T_target @ Rx(roll)``.
-        ``local_only=True`` solves from ``q_init`` alone (dense Cartesian paths: stay on one branch).
+        ``local_only=True`` solves from ``q_init`` alone (dense Cartesian paths: stay on one branch). The
+        other wrist branch of every solution found is a candidate too.
         Raises ``IKError`` with code ``unreachable``, ``joint_limits`` or ``singular``.
         """
         T = check_transform(T_target, "T_target")
@@ -332,9 +350,9 @@ class Kinematics:
         seeds = [np.clip(q_init, self.lower, self.upper)] if local_only else self._seeds(q_init)
         for k, seed in enumerate(seeds):
             q, pe, re, its, roll = self._solve(fid, R_des, p_des, seed, free_roll, clamp=True)
-            if pe < self.config.ik_tol_position * 10 and re < self.config.ik_tol_rotation * 10:
+            if self._converged(pe, re):
                 found.append(self._solution(q, fid, roll if free_roll else 0.0, pe, re, its, k))
-                if k == 0 and q_init is not None:
+                if k == 0 and q_init is not None and float(np.max(np.abs(q - q_init))) <= self.config.ik_near_jump:
                     break  # the current configuration's branch: the least motion, no need to look further
                 if len(found) >= self.config.ik_max_solutions:
                     break
@@ -342,6 +360,8 @@ class Kinematics:
                 score = pe + 0.1 * re
                 if best_fail is None or score < best_fail[0]:
                     best_fail = (score, q)
+        if found and not local_only:
+            found += self._wrist_flips(found, fid, R_des, p_des, free_roll)
         if found:
             return min(found, key=lambda s: float(np.sum((s.q - ref) ** 2)))
         if local_only:
@@ -349,6 +369,30 @@ class Kinematics:
                 "no solution near q_init", code="unreachable", detail={"target_position": p_des.tolist()}
             )
         raise self._diagnose(fid, R_des, p_des, q_init, free_roll, best_fail)
+
+    def _converged(self, pe: float, re: float) -> bool:
+        return pe < self.config.ik_tol_position * 10 and re < self.config.ik_tol_rotation * 10
+
+    def _wrist_flips(
+        self, found: list[IKSolution], fid: int, R_des: np.ndarray, p_des: np.ndarray, free_roll: bool
+    ) -> list[IKSolution]:
+        """The other wrist branch of each solution found, when it lies inside the joint limits.
+
+        The seeds rarely land on both wrist branches, and the one they miss is often the one closest to
+        ``q_init`` (or the one with room to turn the wrist further). It is exact for PAPRAS's roll-pitch-roll
+        wrist; a short polish keeps the tolerance honest should a hand-eye or URDF change break that.
+        """
+        out = []
+        for sol in found:
+            q = wrist_flip(sol.q)
+            if not self.within_limits(q):
+                continue
+            if any(np.allclose(q, s.q, atol=1e-3) for s in found):
+                continue
+            q, pe, re, its, roll = self._solve(fid, R_des, p_des, q, free_roll, clamp=True)
+            if self._converged(pe, re):
+                out.append(self._solution(q, fid, roll if free_roll else 0.0, pe, re, its, sol.seed_index))
+        return out
 
     def _solution(
         self, q: np.ndarray, fid: int, roll: float, pe: float, re: float, its: int, k: int

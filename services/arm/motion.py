@@ -245,7 +245,10 @@ class LinePathConfig:
 
     step_m: float = 0.004
     step_rad: float = np.radians(2.0)
-    max_joint_step: float = 0.12  # rad between neighbouring IK points; more means a branch flip
+    max_joint_step: float = 0.12  # rad between neighbouring IK points; more means a branch flip ...
+    # ... unless halving the step (up to this many times) brings every step under it: near a wrist
+    # singularity the joints move fast but continuously (a flip does not shrink when the step does)
+    max_refinements: int = 3
 
 
 def cartesian_line_path(
@@ -257,8 +260,10 @@ def cartesian_line_path(
 ) -> np.ndarray:
     """Dense joint path (N x 6) moving ``frame`` on a straight line (slerp in orientation) to ``T_goal``.
 
-    Each point is solved from the previous one only, so the arm stays on one IK branch; a failed point or
-    a jump larger than ``max_joint_step`` raises ``TrajectoryError`` (with the fraction of the line done).
+    Each point is solved from the previous one only, so the arm stays on one IK branch. A step whose joints
+    move more than ``max_joint_step`` is halved (up to ``max_refinements`` times); a jump that survives
+    that is a branch flip and raises ``TrajectoryError`` (with the fraction of the line done), as does a
+    point without a solution.
     """
     cfg = config or LinePathConfig()
     q0 = _check_q(q_start, "q_start")
@@ -269,30 +274,43 @@ def cartesian_line_path(
     ang = float((rots[0].inv() * rots[1]).magnitude())
     n = max(int(np.ceil(dist / cfg.step_m)), int(np.ceil(ang / cfg.step_rad)), 1)
     slerp = Slerp([0.0, 1.0], rots)
-    s = np.linspace(0.0, 1.0, n + 1)
-    R = slerp(s).as_matrix()
-    Q = np.empty((n + 1, NDOF))
-    Q[0] = q0
-    for i in range(1, n + 1):
+
+    def pose(s: float) -> np.ndarray:
         T = np.eye(4)
-        T[:3, :3] = R[i]
-        T[:3, 3] = T0[:3, 3] + s[i] * (T1[:3, 3] - T0[:3, 3])
+        T[:3, :3] = slerp(s).as_matrix()
+        T[:3, 3] = T0[:3, 3] + s * (T1[:3, 3] - T0[:3, 3])
+        return T
+
+    def solve(s: float, q_prev: np.ndarray) -> np.ndarray:
         try:
-            Q[i] = kin.ik(T, Q[i - 1], frame=frame, local_only=True).q
+            return kin.ik(pose(s), q_prev, frame=frame, local_only=True).q
         except IKError as e:
             raise TrajectoryError(
                 "straight line leaves the reachable workspace",
                 code="line_unreachable",
-                detail={"fraction": round(float(s[i]), 3), "reason": e.code},
+                detail={"fraction": round(float(s), 3), "reason": e.code},
             ) from e
-        jump = float(np.max(np.abs(Q[i] - Q[i - 1])))
-        if jump > cfg.max_joint_step:
+
+    def step(sa: float, qa: np.ndarray, sb: float, depth: int) -> list[np.ndarray]:
+        qb = solve(sb, qa)
+        jump = float(np.max(np.abs(qb - qa)))
+        if jump <= cfg.max_joint_step:
+            return [qb]
+        if depth >= cfg.max_refinements:
             raise TrajectoryError(
                 "straight line needs a joint jump (near a singularity or a branch flip)",
                 code="line_discontinuous",
-                detail={"fraction": round(float(s[i]), 3), "jump_rad": round(jump, 4)},
+                detail={"fraction": round(float(sb), 3), "jump_rad": round(jump, 4)},
             )
-    return Q
+        mid = 0.5 * (sa + sb)
+        left = step(sa, qa, mid, depth + 1)
+        return left + step(mid, left[-1], sb, depth + 1)
+
+    s = np.linspace(0.0, 1.0, n + 1)
+    points = [q0]
+    for i in range(1, n + 1):
+        points += step(float(s[i - 1]), points[-1], float(s[i]), 0)
+    return np.array(points)
 
 
 def plan_linear_motion(

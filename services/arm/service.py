@@ -1,7 +1,10 @@
 """The arm service's Zenoh face.
 
 - ``arm/move`` (``MoveRequest``) → ``MoveResult`` when the motion has finished (or a typed error: unreachable,
-  colliding with the link pair named, outside the envelope, stopped); ``dry_run`` checks reachability only.
+  colliding with the link pair named, outside the envelope, stopped); ``dry_run`` checks reachability only,
+  and a dry ``pose``/``linear`` move may carry ``q``: the configuration to plan from instead of the arm's
+  (checking a chain of moves before the first runs); a dry run's reply carries the configuration the motion
+  would end in.
 - ``arm/gripper`` (``GripperRequest``) → ``GripperResult`` (opening reached, holding something or not).
 - ``arm/stop`` → halts any motion at once (handled on the event loop, never queued behind a move);
   ``Request(params={"reset": true})`` clears a latched stop.
@@ -98,11 +101,21 @@ class ArmService(Service):
             info = await self.run_cpu(a.move_joints, q, msg.speed_scale, msg.dry_run)
         elif msg.kind == "pose":
             info = await self.run_cpu(a.move_pose, msg.target, msg.speed_scale, msg.free_roll, msg.frame,
-                                      msg.allow_object_contact, msg.dry_run)
+                                      msg.allow_object_contact, msg.dry_run, msg.q)
         else:
             info = await self.run_cpu(a.move_linear, msg.target, msg.speed_scale, msg.frame,
-                                      msg.allow_object_contact, msg.dry_run)
+                                      msg.allow_object_contact, msg.dry_run, msg.q)
+        if msg.dry_run:
+            return self._planned_result(info)
         return self._result(info)
+
+    def _planned_result(self, info: dict) -> MoveResult:
+        """A dry run's reply: where the motion would end (nothing moved)."""
+        q = np.asarray(info["q_end"], dtype=np.float64)
+        frames = info["frames_end"]
+        return MoveResult(q=q, T_base_gripper=frames["gripper"], T_base_camera=frames["camera"],
+                          duration_s=float(info.get("duration_s", 0.0)),
+                          info={k: v for k, v in info.items() if isinstance(v, (int, float, str, bool))})
 
     async def gripper(self, msg: Message | None, ctx: QueryContext) -> GripperResult:
         if not isinstance(msg, GripperRequest):

@@ -33,6 +33,11 @@ class TurnMotion:
     gripper_force: float = 30.0
     open_margin: float = 0.04  # opening beyond the planned width (partial views underestimate it)
     object_box_margin: float = 0.01
+    # joint configurations the IK of the first pose of a pick-turn-place is also started from (besides the
+    # arm's current one, and each solution's other wrist branch): the arm's home posture has both wrist
+    # rolls mid-range, so its branch leaves room to turn either way
+    branch_seeds: tuple[tuple[float, ...], ...] = ((0.0, -0.3, -0.9, 0.0, 1.2, 0.0),)
+    max_checks: int = 48  # pick-turn-place chains dry-run per turn (each is a few cheap planning requests)
 
 
 @dataclass
@@ -48,7 +53,7 @@ class AcquisitionConfig:
     height: int = 480
     static_profile: str = "default"
     dynamic_config: dict = field(default_factory=dict)
-    max_grasp_attempts: int = 16  # executions tried per turn before re-scanning (unreachable ones are cheap)
+    max_grasp_attempts: int = 16  # executions tried per turn before re-scanning (dry-run failures do not count)
     max_rescans: int = 2  # re-scans per view before the session ends with a reason
     force_first_slip: bool = False  # sim: the first grasp slips (recovery test)
     evaluate: bool = True  # compare with ground truth when the cell knows it (sim)
@@ -67,5 +72,8 @@ class AcquisitionConfig:
         if isinstance(data.get("scan"), dict):
             cfg.scan = ScanGeometry(**{k: tuple(v) if isinstance(v, list) else v for k, v in data["scan"].items()})
         if isinstance(data.get("turn"), dict):
-            cfg.turn = TurnMotion(**data["turn"])
+            turn = dict(data["turn"])
+            if "branch_seeds" in turn:  # JSON has lists where the dataclass has tuples
+                turn["branch_seeds"] = tuple(tuple(float(x) for x in q) for q in turn["branch_seeds"])
+            cfg.turn = TurnMotion(**{k: v for k, v in turn.items() if k in {f.name for f in fields(TurnMotion)}})
         return cfg

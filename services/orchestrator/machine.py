@@ -40,7 +40,6 @@ from services.orchestrator.planning import (
     object_box,
     radial_offset_deg,
     scan_pose_candidates,
-    turn_arc,
     turn_sequences,
 )
 from services.orchestrator.store import SessionStore
@@ -102,7 +101,8 @@ class Acquisition:
             "version": 1, "config": config.to_dict(), "state": State.LOCATE.value, "view": 0, "status": "running",
             "turns_deg": [0.0], "centers": {}, "heights": {}, "rescans": {}, "grasp_mode": "auto",
             "scan_sets": {}, "decisions": [], "timings_s": {}, "counters": {"captures": 0, "grasp_attempts": 0,
-                                                                             "slips": 0, "rescans": 0},
+                                                                             "grasp_checks": 0, "slips": 0,
+                                                                             "rescans": 0},
             "started": time.time(), "simulated": None, "error": None,
         }
         if self.resumed:
@@ -328,6 +328,27 @@ class Acquisition:
         self._plan = plan
         return State.TURN
 
+    def _candidates(self, center: np.ndarray, height: float) -> list[tuple[int, Grasp, TurnPoses]]:
+        """Every (grasp, offset, direction) of the plan, likeliest first.
+
+        Radial-ish grasps before side ones (then the planner's rank); within a grasp, once the session has
+        turned one way it keeps turning that way (12 views cover 360 degrees in order); before that, the
+        direction that brings the hand back toward radial goes first, then the planner's offset order.
+        """
+        assert self._plan is not None
+        cfg = self.config
+        offsets = [radial_offset_deg(g, center) for g in self._plan.grasps]
+        order = sorted(range(len(offsets)), key=lambda i: abs(offsets[i]) > 50.0)
+        fixed = self.j.get("turn_direction")
+        out = []
+        for gi in order:
+            grasp = self._plan.grasps[gi]
+            sequences = sorted(turn_sequences(grasp, cfg.turn, height),
+                               key=lambda sq: (fixed is not None and sq.direction != fixed,
+                                               abs(offsets[gi] + sq.direction * cfg.turn_deg)))
+            out += [(gi, grasp, sq) for sq in sequences if fixed is None or sq.direction == fixed]
+        return out
+
     async def turn(self) -> State:
         k = self.view
         if self._plan is None:  # resumed here: the plan is re-made from the registered view
@@ -336,50 +357,51 @@ class Acquisition:
         view = self.store.load_view(k)
         box_c, box_e = object_box(view.center, view.height, view.cloud.xyz, cfg.turn.object_box_margin)
         failures: list[str] = []
-        attempts = 0
+        attempts = checks = 0
         failed_before = set(self.j.setdefault("failed_grasps", {}).get(str(k), []))
-        offsets = [radial_offset_deg(g, view.center) for g in self._plan.grasps]
-        order = sorted(range(len(offsets)), key=lambda i: abs(offsets[i]) > 50.0)  # radial-ish first, then rank
-        for gi in order:
-            grasp = self._plan.grasps[gi]
-            # the turn direction that brings the hand back toward radial first
-            # once the session has turned one way it keeps turning that way (12 views cover 360 degrees in
-            # order); before that, the direction that brings the hand back toward radial goes first
-            fixed = self.j.get("turn_direction")
-            sequences = sorted(turn_sequences(grasp, cfg.turn, view.height),
-                               key=lambda sq: (fixed is not None and sq.direction != fixed,
-                                               abs(offsets[gi] + sq.direction * cfg.turn_deg)))
-            if fixed is not None:
-                sequences = [sq for sq in sequences if sq.direction == fixed]
-            for seq in sequences:
-                signature = f"{grasp.kind}:{gi}:{seq.name}"
-                if attempts >= cfg.max_grasp_attempts:
-                    break
-                if signature in failed_before:  # it slipped before: after a re-scan, try another one first
-                    continue
-                attempts += 1
-                self.j["counters"]["grasp_attempts"] += 1
-                try:
-                    await self._execute_turn(grasp, seq, box_c, box_e, view.center, view.height)
-                except GraspFailed as exc:
-                    self.j["counters"]["slips"] += 1
-                    self.j["failed_grasps"].setdefault(str(k), []).append(signature)
-                    self.decide("grasp failed", grasp=gi, pose=seq.name, reason=exc.message)
-                    self._plan = None
-                    self.j["grasp_mode"] = "auto"
-                    return await self._rescan(k, f"grasp failed: {exc.message}")
-                except RemoteError as exc:
-                    failures.append(f"{seq.name}:{exc.code}")
-                    self.decide("grasp pose not executable", grasp=gi, pose=seq.name, step=self._step, code=exc.code,
-                                message=exc.message[:200])
-                    continue
-                self.decide("turned", grasp=gi, pose=seq.name, kind=grasp.kind, direction=seq.direction)
-                self.j["turns_deg"].append(self.j["turns_deg"][k] + seq.direction * cfg.turn_deg)
-                self.j.setdefault("turn_direction", seq.direction)
-                self.j["view"] = k + 1
-                self.j["grasp_mode"] = "auto"
+        await self._escape(view.center, view.height)
+        await self.cell.set_object_box(box_c, box_e)
+        for gi, grasp, seq in self._candidates(view.center, view.height):
+            signature = f"{grasp.kind}:{gi}:{seq.name}"
+            if attempts >= cfg.max_grasp_attempts or checks >= cfg.turn.max_checks:
+                break
+            if signature in failed_before:  # it slipped before: after a re-scan, try another one first
+                continue
+            # the whole pick-turn-place is planned and checked before the hand moves: an attempt that would
+            # stop half-way (a joint limit in the middle of the turn) would leave the object part-turned,
+            # and every later attempt would work on a view that no longer matches it
+            checks += 1
+            self.j["counters"]["grasp_checks"] = self.j["counters"].get("grasp_checks", 0) + 1
+            try:
+                q_start = await self._check_turn(seq, view.center)
+            except RemoteError as exc:
+                failures.append(f"{seq.name}:{exc.code}")
+                self.decide("grasp pose not executable", grasp=gi, pose=seq.name, step=self._step, code=exc.code,
+                            message=exc.message[:200], dry_run=True)
+                continue
+            attempts += 1
+            self.j["counters"]["grasp_attempts"] += 1
+            try:
+                await self._execute_turn(grasp, seq, q_start, box_c, box_e, view.center, view.height)
+            except GraspFailed as exc:
+                self.j["counters"]["slips"] += 1
+                self.j["failed_grasps"].setdefault(str(k), []).append(signature)
+                self.decide("grasp failed", grasp=gi, pose=seq.name, reason=exc.message)
                 self._plan = None
-                return State.SCAN
+                self.j["grasp_mode"] = "auto"
+                return await self._rescan(k, f"grasp failed: {exc.message}")
+            except RemoteError as exc:
+                failures.append(f"{seq.name}:{exc.code}")
+                self.decide("grasp pose not executable", grasp=gi, pose=seq.name, step=self._step, code=exc.code,
+                            message=exc.message[:200])
+                continue
+            self.decide("turned", grasp=gi, pose=seq.name, kind=grasp.kind, direction=seq.direction)
+            self.j["turns_deg"].append(self.j["turns_deg"][k] + seq.direction * cfg.turn_deg)
+            self.j.setdefault("turn_direction", seq.direction)
+            self.j["view"] = k + 1
+            self.j["grasp_mode"] = "auto"
+            self._plan = None
+            return State.SCAN
         self._plan = None
         if self.j.get("grasp_mode", "auto") != "top_down":
             self.j["grasp_mode"] = "top_down"
@@ -387,6 +409,52 @@ class Acquisition:
             return State.PLAN_GRASP
         self.j["grasp_mode"] = "auto"
         return await self._rescan(k, "no executable grasp")
+
+    async def _check_turn(self, seq: TurnPoses, center: np.ndarray) -> np.ndarray:
+        """Dry-run one pick-turn-place; returns the joints to stand in above the pre-grasp, or raises.
+
+        The only free choice is the IK branch at ``above_pregrasp``: from there every move is a straight
+        line whose dense IK continues the branch. The branches tried: the IK solution nearest the current
+        joints, nearest each configured seed (home), and each one's other wrist branch. A branch whose
+        wrist rolls run into their limits half-way through the turn is the failure this avoids.
+        """
+        from services.arm.kinematics import wrist_flip
+
+        m = self.config.turn
+        state = await self.cell.state()
+        seeds = [np.asarray(state.position, float), *(np.asarray(q, float) for q in m.branch_seeds)]
+        tried: list[np.ndarray] = []
+        last: tuple[str, RemoteError] | None = None
+        for seed in seeds:
+            try:
+                q_a = (await self.cell.move("pose", target=seq.above_pregrasp, q=seed, speed=m.speed_scale,
+                                            dry_run=True)).q
+            except RemoteError as exc:
+                last = last or ("to above pre-grasp", exc)
+                continue
+            for cand in (q_a, wrist_flip(q_a)):
+                if any(np.allclose(cand, t, atol=1e-3) for t in tried):
+                    continue
+                tried.append(cand)
+                step = "to above pre-grasp"
+                try:
+                    if cand is not q_a:  # the IK polishes the flipped branch and checks it is inside the limits
+                        cand = (await self.cell.move("pose", target=seq.above_pregrasp, q=cand,
+                                                     speed=m.speed_scale, dry_run=True)).q
+                    q = cand
+                    for mv in seq.straight_moves(center):
+                        step = mv.step
+                        q = (await self.cell.move("linear", target=mv.target, q=q, speed=m.approach_speed_scale,
+                                                  contact=mv.contact, dry_run=True)).q
+                    return np.asarray(cand, float)
+                except RemoteError as exc:
+                    if exc.code in ("estop_latched", "busy"):
+                        raise
+                    if last is None or last[0] == "to above pre-grasp":  # the farthest a branch got is the news
+                        last = (step, exc)
+        assert last is not None
+        self._step = last[0]
+        raise last[1]
 
     async def _transit(self, target: np.ndarray, frame: str, speed: float) -> MoveResult:
         """Move to ``target`` without a motion planner, safest route first.
@@ -410,12 +478,15 @@ class Acquisition:
         await self.cell.move("home", speed=speed)
         return await self.cell.move("pose", target=target, frame=frame, speed=speed)
 
-    async def _short_move(self, target: np.ndarray, speed: float, contact: bool = True) -> MoveResult:
-        """A few centimetres near the object: a straight line, or a joint motion where the line needs a flip."""
+    async def _short_move(self, target: np.ndarray, speed: float, contact: bool = True,
+                          joint_fallback: bool = False) -> MoveResult:
+        """A few centimetres near the object: a straight line; with ``joint_fallback`` a joint motion where
+        the line needs a flip (only to get away from the object: near it, a joint motion between nearby
+        poses on different IK branches swings the hand far off the line, measured down to the table)."""
         try:
             return await self.cell.move("linear", target=target, speed=speed, contact=contact)
         except RemoteError as exc:
-            if not exc.code.startswith("line_"):
+            if not joint_fallback or not exc.code.startswith("line_"):
                 raise
             return await self.cell.move("pose", target=target, speed=speed, contact=contact)
 
@@ -440,7 +511,7 @@ class Acquisition:
         for route in ((back, back_up), (up,)):
             try:
                 for target in route:
-                    await self._short_move(target, m.approach_speed_scale)
+                    await self._short_move(target, m.approach_speed_scale, joint_fallback=True)
                 return
             except RemoteError as exc:
                 self.decide("escape route failed", code=exc.code)
@@ -450,12 +521,14 @@ class Acquisition:
         await self.cell.clear_object_box()
         await self.cell.move("home", speed=m.approach_speed_scale)
 
-    async def _execute_turn(self, grasp: Grasp, seq: TurnPoses, box_c: np.ndarray, box_e: np.ndarray,
-                            center: np.ndarray, height: float) -> None:
+    async def _execute_turn(self, grasp: Grasp, seq: TurnPoses, q_start: np.ndarray, box_c: np.ndarray,
+                            box_e: np.ndarray, center: np.ndarray, height: float) -> None:
         """Pick, lift, turn about the table normal, set down, release, retreat. Raises on failure.
 
-        Motions before the gripper closes may fail harmlessly (RemoteError: the caller tries the next pose);
-        a failure while holding sets the object back down where the hand is before re-raising.
+        ``q_start`` is the checked branch above the pre-grasp (``_check_turn``); every later move is the
+        straight line the check planned. Motions before the gripper closes may fail harmlessly (RemoteError:
+        the caller tries the next pose); a failure while holding sets the object back down where the hand
+        is before re-raising.
         """
         c, m = self.cell, self.config.turn
         opening = min(0.105, grasp.width + m.open_margin)
@@ -464,11 +537,11 @@ class Acquisition:
         await self._escape(center, height)
         await c.set_object_box(box_c, box_e)
         self._step = "to above pre-grasp"
-        await self._transit(seq.above_pregrasp, "gripper", m.speed_scale)
-        self._step = "down to pre-grasp"
-        await self._short_move(seq.pregrasp, m.approach_speed_scale, contact=False)
-        self._step = "approach"
-        await c.move("linear", target=seq.grasp, speed=m.approach_speed_scale, contact=True)
+        await self._transit_joints(q_start, m.speed_scale)
+        moves = seq.straight_moves(center)
+        for mv in (mv for mv in moves if mv.phase == "approach"):
+            self._step = mv.step
+            await c.move("linear", target=mv.target, speed=m.approach_speed_scale, contact=mv.contact)
         self._step = "close"
         held = await c.gripper(0.0, m.gripper_force)
         if not held.holding:
@@ -477,12 +550,10 @@ class Acquisition:
             raise GraspFailed(held.reason or "nothing between the pads")
         await c.clear_object_box()
         try:
-            self._step = "lift, turn, set down"
-            await self._short_move(seq.lifted, m.approach_speed_scale)
-            for waypoint in turn_arc(seq.lifted, seq.turned_lifted, center):
-                # 5 degrees apart, each IK warm-started from the last: the joint path stays on the arc
-                await c.move("pose", target=waypoint, speed=m.approach_speed_scale, contact=True)
-            await self._short_move(seq.turned, m.approach_speed_scale)
+            for mv in (mv for mv in moves if mv.phase == "held"):
+                # the turn follows the arc in 5-degree chords, each a straight line continuing the branch
+                self._step = f"{mv.step} (holding)"
+                await c.move("linear", target=mv.target, speed=m.approach_speed_scale, contact=True)
         except RemoteError:
             await self._set_down_here(m.lift)
             await c.gripper(opening, m.gripper_force)
@@ -491,12 +562,23 @@ class Acquisition:
         await c.gripper(opening, m.gripper_force)
         self._step = "retreat"
         try:
-            await self._short_move(seq.retreat, m.approach_speed_scale)
-            await self._short_move(seq.above_retreat, m.approach_speed_scale)
+            for mv in (mv for mv in moves if mv.phase == "released"):
+                await c.move("linear", target=mv.target, speed=m.approach_speed_scale, contact=True)
         except RemoteError as exc:  # the object is turned and released: escape as well as we can
             self.decide("retreat failed; escaping", code=exc.code)
             await self._escape(center, height)
         await c.set_object_box(box_c, box_e)
+
+    async def _transit_joints(self, q: np.ndarray, speed: float) -> MoveResult:
+        """Joint motion to a checked configuration; via the home posture when the direct one is refused."""
+        try:
+            return await self.cell.move("joints", q=q, speed=speed)
+        except RemoteError as exc:
+            if exc.code in ("estop_latched", "busy"):
+                raise
+            self.decide("transit via home", code=exc.code)
+        await self.cell.move("home", speed=speed)
+        return await self.cell.move("joints", q=q, speed=speed)
 
     async def _set_down_here(self, lift: float) -> None:
         """While holding, lower the hand by ``lift`` where it is (the object back on the table)."""

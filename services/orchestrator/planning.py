@@ -62,6 +62,29 @@ class TurnPoses:
     above_retreat: np.ndarray
     direction: int = 1  # +1: the planner's turn (counter-clockwise seen from above); -1: the mirror turn
 
+    def straight_moves(self, center: np.ndarray) -> list[ChainMove]:
+        """Every move after ``above_pregrasp``, in order: all straight lines, so that once the arm stands at
+        ``above_pregrasp`` the joint path of the whole pick-turn-place is fixed (each line's dense IK
+        continues the previous one's branch) and can be checked in full before the hand sets off."""
+        moves = [ChainMove("down to pre-grasp", self.pregrasp, "approach", contact=False),
+                 ChainMove("approach", self.grasp, "approach"),
+                 ChainMove("lift", self.lifted, "held")]
+        moves += [ChainMove("turn", w, "held") for w in turn_arc(self.lifted, self.turned_lifted, center)]
+        moves += [ChainMove("set down", self.turned, "held"),
+                  ChainMove("retreat", self.retreat, "released"),
+                  ChainMove("up", self.above_retreat, "released")]
+        return moves
+
+
+@dataclass
+class ChainMove:
+    """One straight-line move of a pick-turn-place: where to, in which phase, whether the pads may touch."""
+
+    step: str
+    target: np.ndarray
+    phase: str  # approach (gripper open, before closing) | held | released
+    contact: bool = True
+
 
 def _lift(T: np.ndarray, dz: float) -> np.ndarray:
     out = T.copy()
