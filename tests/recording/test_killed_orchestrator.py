@@ -68,7 +68,11 @@ def test_killed_orchestrator_recording_is_readable_and_resume_appends_a_part(tmp
         group.wait_alive(["orchestrator"], timeout=120)
         request_sync(group.session, keys.orchestrator(ROBOT, "run"), Request(params={"resume": str(session)}),
                      timeout=30)
-        status = _wait_status(group, 900)
+        try:
+            status = _wait_status(group, 1500)
+        except TimeoutError as exc:  # say where it stood: the resumed orchestrator's last words
+            log = (tmp_path / "logs" / "orchestrator.log").read_text(errors="replace").splitlines()[-40:]
+            raise AssertionError(f"{exc}\n" + "\n".join(log)) from exc
         assert status["status"] == "done", status
         _wait_closed(session / "session.part1.mcap")
 
