@@ -65,6 +65,7 @@ class Cell:
         self.retry_window_s = retry_window_s
         self.tap = tap
         self.retries = 0
+        self.twin_seen = False  # a twin answered once: later silence on sim/world means it is restarting
 
     async def _request(self, key: str, msg: Message | None = None, *, timeout: float) -> Message:
         """Send, and re-send while the service is unavailable (it may be restarting)."""
@@ -75,7 +76,9 @@ class Cell:
             try:
                 reply = await self._send(key, msg, timeout=timeout)
             except ServiceUnavailable as exc:  # includes timeouts: the service died mid-request
-                if time.monotonic() > deadline or key.endswith("/sim/world"):
+                # sim/world: no answer before any twin answered means a real cell (the machine branches on
+                # it at session start); after that it is a twin restarting, worth waiting for
+                if time.monotonic() > deadline or (key.endswith("/sim/world") and not self.twin_seen):
                     raise
                 self.retries += 1
                 event(log, "service unavailable; retrying", logging.WARNING, key=key, code=exc.code)
@@ -146,4 +149,6 @@ class Cell:
     # ---------------------------------------------------------------------------- digital twin only
     async def sim(self, op: str, **params: Any) -> dict[str, Any]:
         reply = await self._request(keys.sim(self.robot, "world"), Request(params={"op": op, **params}), timeout=60.0)
-        return _expect(reply, Ok).info
+        info = _expect(reply, Ok).info
+        self.twin_seen = True
+        return info
