@@ -93,8 +93,13 @@ def _lift(T: np.ndarray, dz: float) -> np.ndarray:
 
 
 def turn_sequences(grasp: Grasp, motion: TurnMotion, object_height: float) -> list[TurnPoses]:
-    """For each angular offset of ``grasp`` (best first), its full pick-turn-place waypoints; then the same
-    with the turn mirrored (-30°), for when the arm cannot follow the planner's direction.
+    """For each angular offset of ``grasp`` (likeliest first), its full pick-turn-place waypoints; then the
+    same with the turn mirrored (-30°), for when the arm cannot follow the planner's direction.
+
+    Frontal offsets go in the planner's order (0, ±15). Top-down ones go from the most tilted toward the
+    arm's base to the most tilted away: at the object's 0.60 m the PAPRAS wrist cannot point straight down
+    (IK: unreachable for every height from 0.10 to 0.30 m), only approaches leaning 30-45° toward the base
+    reach it (``_base_side_first``).
 
     The turn poses come from the planner (turn about the table normal through the object's centre); the
     retreat backs off from the turned grasp as far as the pre-grasp was from the grasp. Without a motion
@@ -103,9 +108,10 @@ def turn_sequences(grasp: Grasp, motion: TurnMotion, object_height: float) -> li
     """
     safe_z = object_height + motion.clearance
     poses = {name: p.matrix() for name, p in grasp.poses.items()}
+    order = _base_side_first if grasp.kind == "top_down" else _offset_order
     out = []
     for direction in (1, -1):
-        for name in sorted((n for n in poses if n.startswith("grasp")), key=_offset_order):
+        for name in sorted((n for n in poses if n.startswith("grasp")), key=order):
             suffix = name[len("grasp"):]
             pre, turn = poses.get("pregrasp" + suffix), poses.get("turn" + suffix)
             if pre is None or turn is None:
@@ -164,6 +170,19 @@ def _at_height(T: np.ndarray, z: float) -> np.ndarray:
     out = T.copy()
     out[2, 3] = max(out[2, 3], z)
     return out
+
+
+def _signed_offset(name: str) -> float:
+    """The angular offset (deg) a pose name carries: ``grasp_minus45`` → -45, ``grasp`` → 0."""
+    digits = "".join(ch for ch in name if ch.isdigit())
+    return -float(digits or 0) if "minus" in name else float(digits or 0)
+
+
+def _base_side_first(name: str) -> float:
+    """Top-down grasps: the planner's offsets turn the hand about its grasp line, and a negative one leans
+    the approach toward the arm's base (``services/grasp/poses.py``: z points away from the base, x' =
+    cos(a) x - sin(a) z). Most negative first."""
+    return _signed_offset(name)
 
 
 def _offset_order(name: str) -> tuple[int, int]:

@@ -14,7 +14,7 @@ from services.arm.arm import ArmConfig, ArmController
 from services.arm.drivers.base import execute
 from services.arm.drivers.replay import ReplayArmDriver
 from services.arm.drivers.sim import SimArmDriver
-from services.arm.errors import ArmError, MotionStopped, ReadOnlyDriver
+from services.arm.errors import ArmError, BadCommand, MotionStopped, ReadOnlyDriver
 from services.arm.motion import plan_joint_motion
 from tests.arm.conftest import Q_HOME
 
@@ -174,3 +174,21 @@ def test_replay_reports_recorded_joints_and_refuses_motion(tmp_path):
         drv.write_setpoint(Q_HOME)
     with pytest.raises(ReadOnlyDriver):
         drv.set_gripper(0.05, 10.0)
+
+
+def test_dry_run_from_a_given_start_plans_a_chain_without_moving(arm, kin):
+    """A chain of moves is checked before the first one runs: each dry run starts where the last would end."""
+    ctl, rec = arm
+    q_before = ctl.state()["q"].copy()
+    T0 = kin.fk(Q_HOME)
+    T1 = T0.copy()
+    T1[:3, 3] += [0.05, 0.0, -0.05]
+    first = ctl.move_pose(T0, dry_run=True)
+    second = ctl.move_linear(T1, dry_run=True, q_start=first["q_end"])
+    np.testing.assert_allclose(kin.fk(second["q_end"]), T1, atol=1e-5)
+    np.testing.assert_allclose(second["frames_end"]["gripper"], T1, atol=1e-5)
+    np.testing.assert_allclose(ctl.state()["q"], q_before)
+    assert rec.sent == []
+    with pytest.raises(BadCommand) as e:  # a start other than where the arm is makes sense only for a dry run
+        ctl.move_linear(T1, q_start=first["q_end"])
+    assert e.value.code == "bad_value"

@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from common.geometry import transform_error
 from services.arm.errors import BadCommand, IKError
-from services.arm.kinematics import Kinematics, KinematicsConfig
+from services.arm.kinematics import Kinematics, KinematicsConfig, wrist_flip
 from services.arm.robot import URDF_PATH
 from tests.arm.conftest import Q_HOME, random_reachable_q
 
@@ -195,3 +195,31 @@ def test_malformed_joints_and_frames_are_refused(kin):
     with pytest.raises(BadCommand) as e:
         kin.fk(np.zeros(6), "nose")
     assert e.value.code == "unknown_frame"
+
+
+# ---------------------------------------------------------------- IK branch choice
+def test_wrist_flip_is_the_same_pose(kin, rng):
+    for q in random_reachable_q(kin, rng, 10):
+        q = q.copy()
+        q[3] = np.clip(q[3], -1.5, 1.5)
+        np.testing.assert_allclose(kin.fk(wrist_flip(q)), kin.fk(q), atol=1e-12)
+        np.testing.assert_allclose(wrist_flip(wrist_flip(q)), q, atol=1e-12)
+
+
+def test_ik_takes_the_nearest_branch_not_the_first_one_found(kin):
+    """Measured in an acquisition: from a scan posture, the DLS run seeded with the current joints converged on
+    the far wrist branch (joint 6 at -2.2 rad, 0.9 rad from its limit, which the turn then ran into) and was
+    taken at once, although the other wrist branch is 1.5 rad closer."""
+    q_scan = np.array([0.597, -0.21, 0.198, -0.69, 1.176, 1.119])
+    q_far = np.array([-0.563, 0.429, 0.163, 1.819, 1.221, -2.208])
+    sol = kin.ik(kin.fk(q_far), q_scan)
+    np.testing.assert_allclose(sol.T_achieved, kin.fk(q_far), atol=1e-5)
+    np.testing.assert_allclose(sol.q, wrist_flip(q_far), atol=1e-3)
+    assert np.linalg.norm(sol.q - q_scan) < np.linalg.norm(q_far - q_scan) - 1.0
+
+
+def test_ik_from_a_nearby_configuration_stays_on_its_branch(kin, rng):
+    for q in random_reachable_q(kin, rng, 10):
+        q_near = np.clip(q + rng.normal(0.0, 0.05, 6), kin.lower, kin.upper)
+        sol = kin.ik(kin.fk(q), q_near)
+        assert np.max(np.abs(sol.q - q)) < 0.05 + 1e-3

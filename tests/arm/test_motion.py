@@ -5,10 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from common.geometry import rotation_about_line
 from services.arm.errors import BadCommand, TrajectoryError
 from services.arm.motion import (
+    LinePathConfig,
     MotionLimits,
     _ruckig_offline,
+    cartesian_line_path,
     plan_joint_motion,
     plan_linear_motion,
     plan_path_motion,
@@ -111,3 +114,20 @@ def test_bad_joint_vectors_are_refused():
         plan_joint_motion(np.zeros(7), np.zeros(6))
     with pytest.raises(BadCommand):
         MotionLimits(max_velocity=-1.0)
+
+
+def test_line_near_a_wrist_singularity_is_refined_not_refused(kin):
+    """Close to joint 5 = 0 the wrist rolls fast but continuously: halving the step shrinks the joint steps
+    (a branch flip would not), so the line is planned with extra points instead of being refused."""
+    q = np.array([0.0, 0.5, -1.0, 0.3, 0.1, 0.2])
+    T0 = kin.fk(q)
+    T1 = rotation_about_line(np.array([0.0, 1.0, 0.0]), T0[:3, 3], np.radians(3.0)) @ T0
+    with pytest.raises(TrajectoryError) as e:
+        cartesian_line_path(kin, q, T1, config=LinePathConfig(max_refinements=0))
+    assert e.value.code == "line_discontinuous"
+    cfg = LinePathConfig()
+    Q = cartesian_line_path(kin, q, T1, config=cfg)
+    assert np.max(np.abs(np.diff(Q, axis=0))) <= cfg.max_joint_step
+    np.testing.assert_allclose(kin.fk(Q[-1]), T1, atol=1e-5)
+    for qi in Q:  # still on the line: the TCP stays where the rotation keeps it
+        assert np.linalg.norm(kin.fk(qi)[:3, 3] - T0[:3, 3]) < 1e-4

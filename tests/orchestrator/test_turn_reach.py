@@ -1,0 +1,115 @@
+"""The pick-turn-place the arm is asked for is one it can execute: IK branch continuity through the turn, top-down
+grasps reachable at the object's (0.60, 0, 0), and the state machine checking a whole attempt before moving.
+
+Synthetic milk carton (the HOPE milk's 7 x 7 x 19 cm) seen from the arm's side, planned by the real grasp
+planner; the arm is the real kinematics/controller (no Zenoh, no twin).
+"""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+import pytest
+
+from common.api import GraspPlanReply, ViewResult
+from common.messages import PointCloud
+from services.arm.errors import IKError, TrajectoryError
+from services.arm.kinematics import Kinematics, wrist_flip
+from services.arm.motion import cartesian_line_path
+from services.grasp.config import GraspPlannerConfig
+from services.grasp.planner import plan_grasps
+from services.orchestrator.config import AcquisitionConfig, TurnMotion
+from services.orchestrator.machine import Acquisition, State
+from services.orchestrator.planning import TurnPoses, turn_sequences
+from services.orchestrator.store import SessionStore
+from tests.grasp.shapes import box, table_plane
+from tests.orchestrator.arm_cell import ArmOnlyCell
+
+CENTER = np.array([0.60, 0.0, 0.0])
+MILK = (0.07, 0.07, 0.19)
+HOME = np.array([0.0, -0.3, -0.9, 0.0, 1.2, 0.0])
+MIN_TCP_Z = 0.01  # services/arm/safety.py
+
+
+def _cameras() -> list[np.ndarray]:
+    """Three wrist-camera positions on the arm's side of the object, as the scan poses place them."""
+    return [CENTER + 0.38 * np.array([-np.cos(np.radians(a)), np.sin(np.radians(a)), 0.0]) + [0, 0, 0.3]
+            for a in (-22.0, 0.0, 22.0)]
+
+
+def _plan(mode: str, yaw_deg: float = 0.0):  # noqa: ANN202
+    xyz, normals = box(MILK, n=12000, xy=CENTER[:2], yaw_deg=yaw_deg, view_from=_cameras())
+    cfg = GraspPlannerConfig(grasp_depth=0.01, max_contact_angle_deg=89.0, mode=mode)  # the grasp service's
+    return xyz, normals, plan_grasps(xyz, normals, table_plane(), cfg)
+
+
+def _executable(kin: Kinematics, seq: TurnPoses) -> bool:
+    """Kinematically: from the IK branch nearest home (or its other wrist branch) at above_pregrasp, every
+    later straight move has a continuous joint path inside the limits, the TCP above the table."""
+    try:
+        q_a = kin.ik(seq.above_pregrasp, HOME).q
+    except IKError:
+        return False
+    for q in (q_a, wrist_flip(q_a)):
+        if not kin.within_limits(q):
+            continue
+        try:
+            for mv in seq.straight_moves(CENTER):
+                Q = cartesian_line_path(kin, q, mv.target)
+                assert min(kin.fk(p)[2, 3] for p in Q) >= MIN_TCP_Z
+                q = Q[-1]
+            return True
+        except TrajectoryError:
+            continue
+    return False
+
+
+@pytest.mark.parametrize("yaw_deg", [-30.0, 0.0, 30.0])
+def test_frontal_grasp_turns_either_way_on_one_branch(kin, yaw_deg):
+    """Either turn direction has an executable frontal grasp, whichever way the carton stands (a session
+    keeps its first direction, so both must exist); measured: at 30 degrees only the grasp on the other pair
+    of faces turns the mirror way (the first one's wrist would pass joint 5's 90 degrees)."""
+    _, _, plan = _plan("frontal", yaw_deg)
+    assert plan.grasps, plan.explain()
+    seqs = [s for g in plan.to_messages() for s in turn_sequences(g, TurnMotion(), MILK[2])]
+    for direction in (1, -1):
+        assert any(_executable(kin, s) for s in seqs if s.direction == direction), direction
+
+
+def test_top_down_grasps_reach_the_object_at_0_60_m_tilted_toward_the_base(kin):
+    _, _, plan = _plan("top_down")
+    assert plan.grasps, plan.explain()
+    grasp = plan.to_messages()[0]
+    seqs = [s for s in turn_sequences(grasp, TurnMotion(), MILK[2]) if s.direction == 1]
+    # the straight-down approach is out of the arm's reach there; the base-side tilts come first and work
+    assert not _executable(kin, next(s for s in seqs if s.name == "grasp"))
+    assert seqs[0].name == "grasp_minus45"
+    assert _executable(kin, seqs[0])
+
+
+@pytest.fixture(scope="module")
+def kin() -> Kinematics:
+    return Kinematics()
+
+
+def test_turn_is_checked_in_full_before_the_hand_moves(kin, tmp_path):
+    """The case that failed in CI: the session turns the mirror way (-30 degrees). Every executed move
+    succeeds, none fails while the object is held, and the machine goes on to the next view."""
+    xyz, normals, plan = _plan("auto")
+    store = SessionStore(tmp_path)
+    store.save_view(ViewResult(view=1, cloud=PointCloud(xyz=xyz.astype(np.float32),
+                                                        normals=normals.astype(np.float32)),
+                               table=table_plane(), center=CENTER.copy(), height=MILK[2],
+                               scan_poses=np.zeros((0, 4, 4))))
+    cell = ArmOnlyCell(np.array([0.597, -0.21, 0.198, -0.69, 1.176, 1.119]), kin)  # a scan posture
+    acq = Acquisition(cell, store, AcquisitionConfig(views=3))  # type: ignore[arg-type]
+    acq.j.update(view=1, state="turn", turns_deg=[0.0, -30.0], turn_direction=-1)
+    acq._plan = GraspPlanReply(grasps=plan.to_messages(), rejections={}, explanation=plan.explain(), seconds=0.0)
+    nxt = asyncio.run(acq.turn())
+    assert nxt == State.SCAN, acq.j["decisions"]
+    assert acq.j["turns_deg"][-1] == -60.0
+    executed = [m for m in cell.log if not m["dry_run"]]
+    assert [m for m in executed if m["error"]] == []
+    assert any(m["holding"] for m in executed)
+    assert acq.j["counters"]["grasp_attempts"] == 1
