@@ -51,7 +51,6 @@ class SimService(Service):
         self.state_error = ""
         self._joints_dirty = False
         self._joints_flush: asyncio.Task | None = None
-        self._clean_stop = False
         doc = None
         if self.state_file is not None and not opts.get("fresh"):
             doc = await self.run_cpu(self.state_file.load)  # a broken file stops the start (typed error)
@@ -184,8 +183,9 @@ class SimService(Service):
 
     async def teardown(self) -> None:
         # a clean stop ends the world (the next start is fresh); a killed twin never gets here
-        if self._clean_stop and self.state_file is not None:
-            self.state_file.discard()
+        state_file = getattr(self, "state_file", None)
+        if getattr(self, "_clean_stop", False) and state_file is not None and hasattr(self, "world"):
+            state_file.discard()
 
     def health_info(self) -> dict[str, object]:
         info: dict[str, object] = {"object": self.world.obj.name, "profile": self.world.profile.name,
