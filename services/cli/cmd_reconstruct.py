@@ -25,6 +25,8 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("session", help="session folder (view_KK/scan_J/{color.png, depth.png, meta.json})")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--profile", default="default", choices=["default", "paper"], help="static registration profile")
+    p.add_argument("--workers", type=int, default=None,
+                   help="local worker processes for views and pair jobs (default: one per CPU core; 1: none)")
     p.add_argument("--gt", help="ground-truth mesh path or HOPE object name, for evaluation")
     p.set_defaults(func=run)
 
@@ -52,7 +54,7 @@ def run(args) -> int:  # noqa: ANN001
     def progress(info: dict[str, Any]) -> None:
         console.print(" ".join(f"{k}={v}" for k, v in info.items() if not isinstance(v, (dict, list))))
 
-    report = reconstruct(session, out, StaticConfig.for_profile(args.profile), progress=progress)
+    report = reconstruct(session, out, StaticConfig.for_profile(args.profile), progress=progress, workers=args.workers)
     model = out / "model.ply"
     if args.gt and model.is_file():
         import open3d as o3d

@@ -9,31 +9,45 @@ others go on. The dynamic stage (the 12 views into one model) plugs in at ``run_
 
 from __future__ import annotations
 
+import multiprocessing
+import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from common.errors import ObjscanError
 from common.session_folder import atomic_write_json, read_scan, read_session
 from services.registration.cloud import write_ply
+from services.registration.dynamic.pair import register_pair
 from services.registration.static import StaticConfig, ViewResult, register_view
 from services.registration.static.evaluate import prior_pose_errors, relative_pose_errors
+
+if TYPE_CHECKING:
+    from services.registration.dynamic.model import MapPairs
 
 Progress = Callable[[dict[str, Any]], None]
 
 
 def reconstruct(
-    session_dir: str | Path, out_dir: str | Path, config: StaticConfig | None = None, progress: Progress | None = None
+    session_dir: str | Path,
+    out_dir: str | Path,
+    config: StaticConfig | None = None,
+    progress: Progress | None = None,
+    workers: int | None = None,
 ) -> dict[str, Any]:
     """Run static registration on every view of ``session_dir``; write PLYs and ``report.json`` to ``out_dir``.
 
     ``progress`` (optional) is called with a small dict after each view (``stage``, ``view``, ``of``,
-    ``status``, ``seconds``) so a CLI can show progress. Returns the report (also written as JSON).
-    Raises ``SessionFolderError`` only when the session itself is unreadable; per-view failures are in
-    the report.
+    ``status``, ``seconds``) so a CLI can show progress. ``workers`` local processes share the work
+    (views, then the dynamic stage's pair jobs); default one per CPU core, ``1`` runs everything here.
+    The result does not depend on ``workers``: each view and each pair job is computed by the same
+    deterministic function wherever it runs. Returns the report (also written as JSON). Raises
+    ``SessionFolderError`` only when the session itself is unreadable; per-view failures are in the report.
     """
     cfg = config or StaticConfig()
     session = read_session(Path(session_dir))
@@ -42,47 +56,82 @@ def reconstruct(
     t_start = time.perf_counter()
     views_report: list[dict[str, Any]] = []
     results: dict[int, ViewResult] = {}
-    n = len(session.views)
-    for k, entry in enumerate(session.views):
-        index = int(entry["index"])
-        t0 = time.perf_counter()
-        item: dict[str, Any] = {"index": index, "commanded_turn_deg": float(entry.get("commanded_turn_deg", 0.0))}
-        try:
-            scans = session.scans(index)
-            if not scans:
-                raise ObjscanError(f"view {index} has no complete scan", code="no_scans")
-            frames = [read_scan(session.path, index, j) for j in scans]
-            result = register_view(frames, cfg)
-            ply = write_ply(out / "views" / f"view_{index:02d}.ply", result.object_cloud)
-            item.update(result.to_json())
-            item["ply"] = str(ply.relative_to(out))
-            item["scan_indices"] = scans
-            gt = _ground_truth(result, frames)
-            if gt:
-                item["ground_truth"] = gt
-            results[index] = result
-            status = "ok"
-        except ObjscanError as exc:
-            item["error"] = {"code": exc.code, "message": exc.message, "detail": exc.detail}
-            status = "failed"
-        item["seconds"] = round(time.perf_counter() - t0, 4)
-        views_report.append(item)
-        if progress is not None:
-            progress(
-                {"stage": "static", "view": index, "of": n, "done": k + 1, "status": status, "seconds": item["seconds"]}
-            )
+    indices = [int(entry["index"]) for entry in session.views]
+    turns = {int(e["index"]): float(e.get("commanded_turn_deg", 0.0)) for e in session.views}
+    n_workers = max(1, min(workers or os.cpu_count() or 1, len(indices)))
+    with _worker_pool(n_workers) as pool:
+        jobs = [(session.path, index, cfg) for index in indices]
+        outcomes = pool.map(_register_one, jobs) if pool is not None else map(_register_one, jobs)
+        for k, (index, item, result) in enumerate(outcomes):
+            item = {"index": index, "commanded_turn_deg": turns[index], **item}
+            if result is not None:
+                ply = write_ply(out / "views" / f"view_{index:02d}.ply", result.object_cloud)
+                item["ply"] = str(ply.relative_to(out))
+                results[index] = result
+            views_report.append(item)
+            if progress is not None:
+                progress({"stage": "static", "view": index, "of": len(indices), "done": k + 1,
+                          "status": "failed" if result is None else "ok", "seconds": item["seconds"]})
 
-    report: dict[str, Any] = {
-        "session": str(session.path),
-        "object": session.data.get("object"),
-        "profile": cfg.profile,
-        "config": cfg.as_dict(),
-        "views": views_report,
-        "summary": _summary(views_report, time.perf_counter() - t_start),
-    }
-    report["model"] = run_dynamic_stage(results, session, out, report, progress)
+        report: dict[str, Any] = {
+            "session": str(session.path),
+            "object": session.data.get("object"),
+            "profile": cfg.profile,
+            "config": cfg.as_dict(),
+            "workers": n_workers,
+            "views": views_report,
+            "summary": _summary(views_report, time.perf_counter() - t_start),
+        }
+        map_pairs = (lambda jobs: list(pool.map(register_pair, jobs))) if pool is not None else None
+        report["model"] = run_dynamic_stage(results, session, out, report, progress, map_pairs=map_pairs)
     atomic_write_json(out / "report.json", report)
     return report
+
+
+def _register_one(job: tuple[Path, int, StaticConfig]) -> tuple[int, dict[str, Any], ViewResult | None]:
+    """One view's static registration (runs in a worker process): its report item and result, or the error."""
+    session_path, index, cfg = job
+    t0 = time.perf_counter()
+    item: dict[str, Any] = {}
+    result: ViewResult | None = None
+    try:
+        scans = read_session(session_path).scans(index)
+        if not scans:
+            raise ObjscanError(f"view {index} has no complete scan", code="no_scans")
+        frames = [read_scan(session_path, index, j) for j in scans]
+        result = register_view(frames, cfg)
+        item.update(result.to_json())
+        item["scan_indices"] = scans
+        gt = _ground_truth(result, frames)
+        if gt:
+            item["ground_truth"] = gt
+    except ObjscanError as exc:
+        item["error"] = {"code": exc.code, "message": exc.message, "detail": exc.detail}
+        result = None
+    item["seconds"] = round(time.perf_counter() - t0, 4)
+    return index, item, result
+
+
+@contextmanager
+def _worker_pool(workers: int) -> Iterator[ProcessPoolExecutor | None]:
+    """``workers`` spawned processes (not forked: open3d's OpenMP threads do not survive a fork), or None.
+
+    Each worker runs single-threaded (``OMP_NUM_THREADS=1``): the processes already fill the cores, and
+    OpenMP threads on top would only oversubscribe them.
+    """
+    if workers <= 1:
+        yield None
+        return
+    env_before = os.environ.get("OMP_NUM_THREADS")
+    os.environ["OMP_NUM_THREADS"] = "1"  # inherited by the spawned workers; this process is set up already
+    try:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            yield pool
+    finally:
+        if env_before is None:
+            os.environ.pop("OMP_NUM_THREADS", None)
+        else:
+            os.environ["OMP_NUM_THREADS"] = env_before
 
 
 # ==================================================================================================
@@ -99,6 +148,7 @@ def run_dynamic_stage(
     out_dir: Path,
     report: dict[str, Any],
     progress: Progress | None = None,
+    map_pairs: MapPairs | None = None,
 ) -> dict[str, Any] | None:
     """Dynamic registration of the views into one model: writes ``out_dir/model.ply``, returns its figures.
 
@@ -113,7 +163,7 @@ def run_dynamic_stage(
     views = [view_from_static(results[k], session.commanded_turn_deg(k), index=k) for k in order]
     say = (lambda stage, info: progress({"stage": f"dynamic:{stage}", **info})) if progress else None
     try:
-        model = build_model(views, DynamicConfig(), progress=say)
+        model = build_model(views, DynamicConfig(), map_pairs=map_pairs, progress=say)
     except ObjscanError as exc:
         return {"error": {"code": exc.code, "message": exc.message, "detail": exc.detail},
                 "views_used": order, "seconds": round(time.perf_counter() - t0, 4)}

@@ -68,3 +68,19 @@ def test_report_has_figures_timings_and_ground_truth(report):
 def test_missing_session_is_a_session_error(tmp_path):
     with pytest.raises(SessionFolderError):
         reconstruct(tmp_path / "nope", tmp_path / "out")
+
+
+def test_worker_processes_do_not_change_the_result(session, report, tmp_path):
+    """The default run (one worker process per core) and a run in this process agree on every figure."""
+    _, pooled, _ = report
+    here = reconstruct(session, tmp_path / "here", workers=1)
+    assert here["workers"] == 1
+
+    def figures(view: dict) -> dict:
+        return {k: v for k, v in view.items() if k not in ("seconds", "timings_s")}
+
+    assert [figures(v) for v in here["views"]] == [figures(v) for v in pooled["views"]]
+    for k in (0, 1):
+        a = read_ply(tmp_path / "here" / "views" / f"view_{k:02d}.ply")
+        b = read_ply(Path(report[0]) / "views" / f"view_{k:02d}.ply")
+        assert np.array_equal(a.xyz, b.xyz) and np.array_equal(a.rgb, b.rgb)
