@@ -51,6 +51,7 @@ class SimService(Service):
         self.state_error = ""
         self._joints_dirty = False
         self._joints_flush: asyncio.Task | None = None
+        self._long_ops = 0  # world changes running in a worker thread (they hold the world's lock and save after)
         doc = None
         if self.state_file is not None and not opts.get("fresh"):
             doc = await self.run_cpu(self.state_file.load)  # a broken file stops the start (typed error)
@@ -98,13 +99,11 @@ class SimService(Service):
         if msg.opening < w.gripper_opening - 1e-4 and not w.attached:
             if w.T_base_gripper is None:
                 raise InvalidRequest("no TCP pose reported yet: move the arm before closing the gripper")
-            outcome = await self.run_cpu(w.close_gripper, w.T_base_gripper, msg.opening)
-            self._persist()
+            outcome = await self._long_op(w.close_gripper, w.T_base_gripper, msg.opening)
             return GripperResult(opening=float(outcome.width), holding=bool(outcome.success), reason=outcome.reason)
         if w.attached and msg.opening <= w.gripper_opening + 1e-4:
             return GripperResult(opening=float(w.gripper_opening), holding=True, reason="already_holding")
-        released = await self.run_cpu(w.open_gripper, msg.opening)
-        self._persist()
+        released = await self._long_op(w.open_gripper, msg.opening)
         return GripperResult(opening=float(w.gripper_opening), holding=False,
                              reason="released" if released else "opened")
 
@@ -174,7 +173,18 @@ class SimService(Service):
 
     async def _flush_joints_later(self) -> None:
         await asyncio.sleep(JOINTS_SAVE_DELAY_S)
-        if self._joints_dirty:
+        # a grasp being evaluated holds the world's lock for seconds: do not block the loop on it, its own
+        # save afterwards includes the joints
+        if self._joints_dirty and not self._long_ops:
+            self._persist()
+
+    async def _long_op(self, fn, *args):  # noqa: ANN001, ANN202
+        """Run a world change in a worker thread, then save the world."""
+        self._long_ops += 1
+        try:
+            return await self.run_cpu(fn, *args)
+        finally:
+            self._long_ops -= 1
             self._persist()
 
     def stop(self) -> None:
