@@ -151,9 +151,11 @@ def extreme_point(slice_local: np.ndarray, col: int, side: int, tolerance: float
 
 
 def candidate_regions(frame: ObjectFrame, fingertip: float, slice_thickness: float, voxel: float,
-                      curvature_radius: float, seed_tolerance: float = 0.002, refit_normals: bool = True
+                      curvature_radius: float, seed_tolerance: float = 0.002, refit_normals: bool = True,
+                      axes: list[tuple[str, int]] | tuple[tuple[str, int], ...] = (("y", 1), ("z", 2))
                       ) -> tuple[list[CandidateRegion], int]:
-    """The four candidate regions (y-min, y-max, z-min, z-max); empty list when the slice is empty.
+    """The candidate regions at the min and max end of each of ``axes`` (default y and z: y-min, y-max,
+    z-min, z-max); empty list when the slice is empty.
 
     Returns (regions, number of slice points).
     """
@@ -167,7 +169,7 @@ def candidate_regions(frame: ObjectFrame, fingertip: float, slice_thickness: flo
     slab = np.flatnonzero(np.abs(local[:, 0]) <= half[0] + curvature_radius)
     slab_local = local[slab]
     found, near_all = [], []
-    for axis_name, col in (("y", 1), ("z", 2)):
+    for axis_name, col in axes:
         for side in (-1, 1):
             seed = int(slice_idx[extreme_point(local[slice_idx], col, side, seed_tolerance)])
             offset = np.abs(slab_local - local[seed])

@@ -88,6 +88,19 @@ class GraspPlannerConfig:
     its curvature, as GeoGrasp does with PCL's NormalEstimation) rather than the input normals: dense
     scans estimated with a small neighbourhood carry normals too noisy for the antipodal test."""
     min_region_points: int = 3
+    complete_hidden_sides: bool = True
+    """Mirror a side face the scan poses could not see onto its end of the box (completion.py): a box
+    turned away from the cameras shows no two opposite side faces, and without it no antipodal pair
+    exists. False: plan on observed points only (the plan then reports ``side_not_seen``)."""
+    side_face_band: float = 0.004
+    """Minimum depth, from a box side, of the band whose axis-facing points count as that side's face
+    (a quarter of the half extent when larger)."""
+    side_face_angle_deg: float = 30.0
+    """A point belongs to a side face when its normal is within this angle of the box axis."""
+    hidden_side_ratio: float = 0.05
+    """An end of an axis is hidden when it has at most this fraction of the other end's face points."""
+    min_side_face_points: int = 20
+    """The seen end needs at least this many face points to be mirrored."""
     candidates_per_axis: int = 1
     """Grasps kept per region axis (the paper: the best one)."""
     max_checks_per_axis: int = 25
@@ -158,13 +171,15 @@ class GraspPlannerConfig:
         if self.mode not in ("auto", "frontal", "top_down", "both"):
             raise GraspConfigError(f"unknown planner mode {self.mode!r}",
                                    detail={"allowed": ["auto", "frontal", "top_down", "both"]})
-        for name in ("max_grasp_line_tilt_deg", "max_contact_angle_deg"):
+        for name in ("max_grasp_line_tilt_deg", "max_contact_angle_deg", "side_face_angle_deg"):
             if not 0.0 < getattr(self, name) <= 90.0:
                 raise GraspConfigError(f"{name} must be in (0, 90]", detail={name: getattr(self, name)})
         for name in ("pregrasp_distance", "top_down_crop"):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise GraspConfigError(f"{name} must be positive or None", detail={name: value})
+        if not 0.0 < self.hidden_side_ratio < 1.0:
+            raise GraspConfigError("hidden_side_ratio must be in (0, 1)", detail={"value": self.hidden_side_ratio})
         if self.table_clearance < 0:
             raise GraspConfigError("table_clearance must be >= 0")
 

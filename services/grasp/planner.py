@@ -4,16 +4,17 @@ Input: an isolated object cloud with normals in ``base`` and the table plane. Ou
 :class:`GraspPlan` with the surviving grasps (best first, each with its ranking terms and named poses)
 and the reasons the other candidates were dropped.
 
-Pipeline per variant: table-aligned box → central slice → four candidate regions → all-pairs GeoGrasp
-ranking for the y and the z regions → collision filter (table or object-below box, pad boxes, object
-points) → poses. Everything after the first masks works on a few thousand points at most, so a
-20k-point cloud plans in milliseconds.
+Pipeline: table-aligned box → a side face the scan poses could not see mirrored in from the seen one
+(completion.py), then per variant: central slice → candidate regions at both ends of the horizontal
+region axes → all-pairs GeoGrasp ranking → collision filter (table or object-below box, pad boxes,
+object points, inferred ones included) → poses. Everything after the first masks works on a few
+thousand points at most, so a 20k-point cloud plans in milliseconds.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,7 @@ from services.grasp.collision import (
     remainder_box,
     table_box,
 )
+from services.grasp.completion import complete_hidden_sides, horizontal_axes
 from services.grasp.config import GraspPlannerConfig
 from services.grasp.errors import GraspInputError
 from services.grasp.poses import frontal_rotation, grasp_poses, top_down_rotation
@@ -40,13 +42,23 @@ MIN_POINTS = 10
 
 @dataclass(frozen=True)
 class PlanningInput:
-    """Validated inputs: float64 points, unit normals, an upward unit table normal and its offset."""
+    """Validated inputs: float64 points, unit normals, an upward unit table normal and its offset.
+
+    Rows from ``n_observed`` on are inferred (mirrored in by the completion step); None = all observed.
+    """
 
     xyz: np.ndarray
     normals: np.ndarray
     up: np.ndarray
     offset: float
     heights: np.ndarray
+    n_observed: int | None = None
+
+    def inferred(self, indices: np.ndarray | list[int]) -> int:
+        """How many of the cloud rows ``indices`` are inferred points."""
+        if self.n_observed is None:
+            return 0
+        return int(np.count_nonzero(np.asarray(indices) >= self.n_observed))
 
 
 def validate_inputs(cloud_xyz: Any, normals: Any, table: Plane) -> PlanningInput:
@@ -111,6 +123,13 @@ def plan_grasps(cloud_xyz: Any, normals: Any, table: Plane,
     t0 = time.perf_counter()
     inp = validate_inputs(cloud_xyz, normals, table)
     frame = object_frame(inp.xyz, inp.up)
+    completion = complete_hidden_sides(frame, inp.xyz, inp.normals, inp.up, band=cfg.side_face_band,
+                                       face_angle_deg=cfg.side_face_angle_deg, hidden_ratio=cfg.hidden_side_ratio,
+                                       min_face_points=cfg.min_side_face_points, enabled=cfg.complete_hidden_sides)
+    if completion.n_inferred:
+        inp = replace(inp, xyz=completion.xyz, normals=completion.normals,
+                      heights=completion.xyz @ inp.up + inp.offset, n_observed=completion.n_observed)
+        frame = completion.frame(frame)
     rng = np.random.default_rng(cfg.seed)
     center_local, n_slices = estimate_object_center(frame.local, frame.extents, cfg.slice_thickness,
                                                     cfg.center_slices, cfg.center_min_points, rng)
@@ -120,6 +139,10 @@ def plan_grasps(cloud_xyz: Any, normals: Any, table: Plane,
     grasps: list[PlannedGrasp] = []
     attempted: list[str] = []
     timings = {"prepare": (t1 - t0) * 1e3}
+    for side in completion.incomplete_sides:
+        rejections.add("side_not_seen", example={
+            "axis": side.axis, "status": side.status, "face_points": list(side.points),
+            "why": "an antipodal pair on this axis needs a face at both ends; no scan pose saw one of them"})
     if cfg.mode in ("auto", "frontal", "both"):
         attempted.append("frontal")
         ts = time.perf_counter()
@@ -132,7 +155,8 @@ def plan_grasps(cloud_xyz: Any, normals: Any, table: Plane,
         timings["top_down"] = (time.perf_counter() - ts) * 1e3
     timings["total"] = (time.perf_counter() - t0) * 1e3
     return GraspPlan(grasps=grasps, rejections=rejections, attempted=attempted, object_center=center,
-                     center_slices=n_slices, main_axis=frame.main_axis.copy(), timings_ms=timings)
+                     center_slices=n_slices, main_axis=frame.main_axis.copy(), timings_ms=timings,
+                     completion=completion.summary())
 
 
 def plan_grasps_for_cloud(cloud: PointCloud, table: Plane, config: GraspPlannerConfig | None = None
@@ -180,8 +204,9 @@ def _plan_frontal(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, cf
             continue
         nrm = np.array([pair.n_j, pair.n_i] if swapped else [pair.n_i, pair.n_j])
         out.append(_make_grasp("frontal", axis, pair, R, np.array([p_plus, p_minus]), nrm, inp,
-                               cfg.grasp_depth, cfg.frontal_offsets_deg, center, cfg, boxes))
-    out.sort(key=lambda gr: -gr.rank)
+                               cfg.grasp_depth, cfg.frontal_offsets_deg, center, cfg, boxes,
+                               inp.inferred([pair.i, pair.j])))
+    out.sort(key=_order)
     return out
 
 
@@ -236,8 +261,9 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
         depth = float(np.clip(mid_height - cfg.table_clearance, 0.0, cfg.grasp_depth))
         n_pair = np.array([pair.n_j, pair.n_i] if swapped else [pair.n_i, pair.n_j])
         out.append(_make_grasp("top_down", axis, pair, R, np.array([p_plus, p_minus]), n_pair, inp,
-                               depth, cfg.top_down_offsets_deg, center, cfg, boxes))
-    out.sort(key=lambda gr: -gr.rank)
+                               depth, cfg.top_down_offsets_deg, center, cfg, boxes,
+                               inp.inferred(keep[[pair.i, pair.j]])))
+    out.sort(key=_order)
     return out
 
 
@@ -246,10 +272,18 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
 def _ranked_pairs(xyz: np.ndarray, normals: np.ndarray, up: np.ndarray, frame: ObjectFrame,
                   cfg: GraspPlannerConfig, kind: str, rej: Rejections) -> list[tuple[RankedPair, str]]:
     """The valid pairs of the y and the z regions, best first per axis (at most
-    ``max_checks_per_axis`` each); pair-level rejections go to ``rej``."""
+    ``max_checks_per_axis`` each); pair-level rejections go to ``rej``.
+
+    Only the region axes that lie along the table are tried: a pair at the two ends of an axis along the
+    table normal joins the object's top to its lowest seen points, a vertical line no horizontal or
+    downward hand closes on (GeoGrasp likewise takes its initial points along a horizontal axis)."""
+    axes = horizontal_axes(frame, up)
+    if not axes:
+        rej.add("too_few_points", example={"kind": kind, "why": "no box axis along the table"})
+        return []
     regions, n_slice = candidate_regions(frame, cfg.gripper.pad_width, cfg.slice_thickness,
                                          cfg.region_voxel, cfg.curvature_radius,
-                                         refit_normals=cfg.refit_normals)
+                                         refit_normals=cfg.refit_normals, axes=axes)
     if not regions:
         rej.add("too_few_points", example={"kind": kind, "slice_points": n_slice})
         return []
@@ -269,6 +303,12 @@ def _ranked_pairs(xyz: np.ndarray, normals: np.ndarray, up: np.ndarray, frame: O
                                     "best_contacts": [xyz[ex.i], xyz[ex.j]], **ex.metrics})
         out += [(p, axis) for p in ranking.best]
     return out
+
+
+def _order(grasp: PlannedGrasp) -> tuple[float, float]:
+    """Grasps on two seen faces first, then by GeoGrasp rank: a mirrored-in contact is an assumption
+    (exact for boxes and cans), so it only leads when nothing seen on both sides survives."""
+    return grasp.metrics.get("inferred_contacts", 0.0), -grasp.rank
 
 
 def _object_top(heights: np.ndarray) -> float:
@@ -301,12 +341,14 @@ def _object_hits(boxes: dict[str, OrientedBox], xyz: np.ndarray, cfg: GraspPlann
 
 def _make_grasp(kind: str, axis: str, pair: RankedPair, R: np.ndarray, contacts: np.ndarray,
                 contact_normals: np.ndarray, inp: PlanningInput, depth: float, offsets: tuple[float, ...],
-                center: np.ndarray, cfg: GraspPlannerConfig, boxes: dict[str, OrientedBox]
+                center: np.ndarray, cfg: GraspPlannerConfig, boxes: dict[str, OrientedBox], inferred: int
                 ) -> PlannedGrasp:
-    """A surviving grasp with its poses; ``contacts`` = (p_plus, p_minus), y running minus → plus."""
+    """A surviving grasp with its poses; ``contacts`` = (p_plus, p_minus), y running minus → plus;
+    ``inferred`` = how many of the two contacts lie on a mirrored-in face (metric ``inferred_contacts``)."""
     mid = 0.5 * (contacts[0] + contacts[1])
     poses = grasp_poses(R, mid, depth, cfg.pregrasp_back_off, offsets, inp.up, center, cfg.turn_deg)
-    metrics = {**pair.metrics, "depth": depth, "contact_height": float(mid @ inp.up + inp.offset)}
+    metrics = {**pair.metrics, "depth": depth, "contact_height": float(mid @ inp.up + inp.offset),
+               "inferred_contacts": float(inferred)}
     return PlannedGrasp(kind=kind, axis=axis, contacts=np.asarray(contacts, float),
                         contact_normals=np.asarray(contact_normals, float), width=pair.metrics["width"],
                         rank=pair.rank, metrics=metrics, poses=poses, collision_boxes=boxes)

@@ -12,6 +12,7 @@ from services.grasp.boxes import OrientedBox
 
 REASONS = (
     "too_short_for_frontal",
+    "side_not_seen",
     "too_few_points",
     "too_wide",
     "grasp_line_not_horizontal",
@@ -102,6 +103,9 @@ class GraspPlan:
     center_slices: int
     main_axis: np.ndarray
     timings_ms: dict[str, float] = field(default_factory=dict)
+    completion: dict[str, Any] = field(default_factory=dict)
+    """What the planner inferred: per horizontal box axis, the face points seen at each end and whether
+    a hidden side face was mirrored in (services/grasp/completion.py)."""
 
     def __bool__(self) -> bool:
         return bool(self.grasps)
@@ -109,11 +113,13 @@ class GraspPlan:
     def explain(self) -> str:
         """One line for people: what was found, or why nothing was."""
         tried = "+".join(self.attempted) or "nothing"
+        completed = self.completion.get("completed_axes") or []
+        note = f" (hidden side {'+'.join(completed)} mirrored from the seen one)" if completed else ""
         if self.grasps:
             kinds = ", ".join(f"{g.kind}/{g.axis} rank {g.rank:.2f}" for g in self.grasps)
-            return f"{len(self.grasps)} grasp(s) from {tried}: {kinds}"
+            return f"{len(self.grasps)} grasp(s) from {tried}: {kinds}{note}"
         reasons = ", ".join(f"{k} x{v}" for k, v in self.rejections.counts.items()) or "no candidates"
-        return f"no grasp from {tried}: {reasons}"
+        return f"no grasp from {tried}: {reasons}{note}"
 
     def to_messages(self, frame: str = "base") -> list[Grasp]:
         return [g.to_message(frame) for g in self.grasps]
@@ -129,6 +135,7 @@ class GraspPlan:
             "object_center": self.object_center,
             "center_slices": self.center_slices,
             "timings_ms": self.timings_ms,
+            "completion": self.completion,
             "explain": self.explain(),
         })
 
