@@ -28,7 +28,7 @@ from services.cli.cells import cell_specs
 ROBOT = keys.DEFAULT_ROBOT
 WORKER_MODULE = "tests.faults.registration_worker"  # services.registration + a bug workaround (see there)
 SCAN_CONFIG = {"object": "milk", "views": 3, "profile": "robot-turned", "seed": 0, "width": 640, "height": 480}
-"""``objscan scan``'s defaults with 3 views (the ``ideal`` profile finds no executable grasp at view 1 today)."""
+"""``objscan scan``'s defaults with 3 views: the profile with real turn errors and slips."""
 
 
 def cell_processes(sessions: Path, registration_workers: int = 2) -> list[ProcessSpec]:

@@ -52,15 +52,16 @@ def _assert_like_clean(final, injector, summary, clean, root) -> None:  # noqa: 
     assert len(set(summary.all_frame_hashes)) == len(summary.all_frame_hashes), "a frame was saved twice"
 
 
-@pytest.mark.slow  # see docs/reliability.md: in one pytest run the injector fired no fault (cause open)
+@pytest.mark.slow
 def test_every_service_killed_in_turn_acquisition_completes_like_a_clean_run(clean, tmp_path):
     faults = [Fault("camera", "scan", view=0), Fault("grasp", "plan_grasp", view=0), Fault("arm", "turn", view=0),
-              Fault("registration*", "register", view=1), Fault("registration*", "model")]
+              Fault("sim", "scan", view=1), Fault("registration*", "register", view=1),
+              Fault("registration*", "model")]
     final, injector, summary = _acquire(tmp_path, faults)
     print(json.dumps({"fired": [f.fired_at for f in injector.fired], "captures": summary.captures,
                       "clean_captures": clean.captures}, default=str))
     assert [f.fired_at["label"].split("-")[0] for f in injector.fired] == [
-        "camera", "grasp", "arm", "registration", "registration"]
+        "camera", "grasp", "arm", "sim", "registration", "registration"]
     _assert_like_clean(final, injector, summary, clean, tmp_path)
     report = json.loads((tmp_path / "session" / "report.json").read_text())
     assert report, "the model's report exists"
