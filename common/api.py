@@ -30,7 +30,9 @@ class MoveRequest(Message):
     ``kind``: ``joints`` (``q``), ``pose`` (joint-space motion to ``target``), ``linear`` (straight
     Cartesian line to ``target``) or ``home``. ``target`` is ``T_base_<frame>`` with frame ``gripper`` or
     ``camera``. ``free_roll`` lets the gripper turn about its approach axis when the exact pose is out of
-    reach.
+    reach. On a ``dry_run`` ``pose``/``linear`` move, ``q`` is the configuration to plan from (so a chain of
+    motions can be checked before any of them runs); the reply then says where the motion would end. A real
+    ``pose``/``linear`` move with ``q`` is refused: it always starts where the arm is.
     """
 
     kind: str = "pose"
