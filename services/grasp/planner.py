@@ -182,8 +182,10 @@ def _plan_frontal(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, cf
         return []
     table = table_box(inp.xyz, inp.up, inp.offset, cfg.table_box_size, cfg.table_box_height)
     out: list[PlannedGrasp] = []
-    for pair, axis in _ranked_pairs(inp.xyz, inp.normals, inp.up, frame, cfg, "frontal", rej):
-        if _axis_full(out, axis, cfg):
+    slots: dict[tuple[str, str], int] = {}
+    for pair, axis, source in _ranked_pairs(inp.xyz, inp.normals, inp.up, frame, cfg, "frontal", rej,
+                                            inp.n_observed):
+        if slots.get((axis, source), 0) >= cfg.candidates_per_axis:
             continue
         p1, p2 = inp.xyz[pair.i], inp.xyz[pair.j]
         R, swapped = frontal_rotation(p1, p2, inp.up, np.asarray(cfg.approach_origin, float))
@@ -206,6 +208,7 @@ def _plan_frontal(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, cf
         out.append(_make_grasp("frontal", axis, pair, R, np.array([p_plus, p_minus]), nrm, inp,
                                cfg.grasp_depth, cfg.frontal_offsets_deg, center, cfg, boxes,
                                inp.inferred([pair.i, pair.j])))
+        slots[(axis, source)] = slots.get((axis, source), 0) + 1
     out.sort(key=_order)
     return out
 
@@ -225,8 +228,10 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
     below = remainder_box(inp.heights, crop_bottom, inp.up, inp.offset, frame.box)
     table = table_box(inp.xyz, inp.up, inp.offset, cfg.table_box_size, cfg.table_box_height)
     out: list[PlannedGrasp] = []
-    for pair, axis in _ranked_pairs(xyz, nrm, inp.up, crop_frame, cfg, "top_down", rej):
-        if _axis_full(out, axis, cfg):
+    n_observed = None if inp.n_observed is None else int(np.count_nonzero(keep < inp.n_observed))
+    slots: dict[tuple[str, str], int] = {}
+    for pair, axis, source in _ranked_pairs(xyz, nrm, inp.up, crop_frame, cfg, "top_down", rej, n_observed):
+        if slots.get((axis, source), 0) >= cfg.candidates_per_axis:
             continue
         p1, p2 = xyz[pair.i], xyz[pair.j]
         R, swapped = top_down_rotation(p1, p2, inp.up, np.asarray(cfg.approach_origin, float))
@@ -263,6 +268,7 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
         out.append(_make_grasp("top_down", axis, pair, R, np.array([p_plus, p_minus]), n_pair, inp,
                                depth, cfg.top_down_offsets_deg, center, cfg, boxes,
                                inp.inferred(keep[[pair.i, pair.j]])))
+        slots[(axis, source)] = slots.get((axis, source), 0) + 1
     out.sort(key=_order)
     return out
 
@@ -270,9 +276,16 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
 # --------------------------------------------------------------------------------------- helpers
 
 def _ranked_pairs(xyz: np.ndarray, normals: np.ndarray, up: np.ndarray, frame: ObjectFrame,
-                  cfg: GraspPlannerConfig, kind: str, rej: Rejections) -> list[tuple[RankedPair, str]]:
-    """The valid pairs of the y and the z regions, best first per axis (at most
-    ``max_checks_per_axis`` each); pair-level rejections go to ``rej``.
+                  cfg: GraspPlannerConfig, kind: str, rej: Rejections, n_observed: int | None = None
+                  ) -> list[tuple[RankedPair, str, str]]:
+    """The valid pairs of the y and the z regions as (pair, axis, source), best first per axis and
+    source (at most ``max_checks_per_axis`` each); pair-level rejections go to ``rej``.
+
+    Rows from ``n_observed`` on are inferred (mirrored in). Then the regions are cut twice: from the
+    observed points alone (source "observed", the pairs an unaided GeoGrasp would rank) and from the
+    completed cloud (source "completed", kept only for axes whose regions hold inferred points). Each
+    source has its own grasp slots, so completing a hidden side adds grasps and never takes away one
+    the observed points give.
 
     Only the region axes that lie along the table are tried: a pair at the two ends of an axis along the
     table normal joins the object's top to its lowest seen points, a vertical line no horizontal or
@@ -281,27 +294,34 @@ def _ranked_pairs(xyz: np.ndarray, normals: np.ndarray, up: np.ndarray, frame: O
     if not axes:
         rej.add("too_few_points", example={"kind": kind, "why": "no box axis along the table"})
         return []
-    regions, n_slice = candidate_regions(frame, cfg.gripper.pad_width, cfg.slice_thickness,
-                                         cfg.region_voxel, cfg.curvature_radius,
-                                         refit_normals=cfg.refit_normals, axes=axes)
-    if not regions:
-        rej.add("too_few_points", example={"kind": kind, "slice_points": n_slice})
-        return []
-    by_axis: dict[str, list] = {}
-    for r in regions:
-        by_axis.setdefault(r.axis, []).append(r)
+    completed = n_observed is not None and n_observed < len(frame.local)
+    sources = [("observed", ObjectFrame(frame.box, frame.local[:n_observed]) if completed else frame)]
+    if completed:
+        sources.append(("completed", frame))
     out = []
-    for axis, (a, b) in by_axis.items():
-        if min(len(a.indices), len(b.indices)) < cfg.min_region_points or a.seed_index == b.seed_index:
-            rej.add("too_few_points", example={"kind": kind, "axis": axis,
-                                               "region_points": [len(a.indices), len(b.indices)]})
+    for source, src_frame in sources:
+        regions, n_slice = candidate_regions(src_frame, cfg.gripper.pad_width, cfg.slice_thickness,
+                                             cfg.region_voxel, cfg.curvature_radius,
+                                             refit_normals=cfg.refit_normals, axes=axes)
+        if not regions:
+            rej.add("too_few_points", example={"kind": kind, "source": source, "slice_points": n_slice})
             continue
-        ranking = rank_region_pair(a, b, xyz, normals, frame.main_axis, up, cfg, cfg.max_checks_per_axis)
-        for reason, count in ranking.rejected_counts.items():
-            ex = ranking.rejected_best[reason]
-            rej.add(reason, count, {"kind": kind, "axis": axis, "pairs": count,
-                                    "best_contacts": [xyz[ex.i], xyz[ex.j]], **ex.metrics})
-        out += [(p, axis) for p in ranking.best]
+        by_axis: dict[str, list] = {}
+        for r in regions:
+            by_axis.setdefault(r.axis, []).append(r)
+        for axis, (a, b) in by_axis.items():
+            if source == "completed" and max(a.indices.max(initial=-1), b.indices.max(initial=-1)) < n_observed:
+                continue  # nothing inferred on this axis: the observed source already ranked these pairs
+            if min(len(a.indices), len(b.indices)) < cfg.min_region_points or a.seed_index == b.seed_index:
+                rej.add("too_few_points", example={"kind": kind, "axis": axis, "source": source,
+                                                   "region_points": [len(a.indices), len(b.indices)]})
+                continue
+            ranking = rank_region_pair(a, b, xyz, normals, src_frame.main_axis, up, cfg, cfg.max_checks_per_axis)
+            for reason, count in ranking.rejected_counts.items():
+                ex = ranking.rejected_best[reason]
+                rej.add(reason, count, {"kind": kind, "axis": axis, "source": source, "pairs": count,
+                                        "best_contacts": [xyz[ex.i], xyz[ex.j]], **ex.metrics})
+            out += [(p, axis, source) for p in ranking.best]
     return out
 
 
@@ -314,10 +334,6 @@ def _order(grasp: PlannedGrasp) -> tuple[float, float]:
 def _object_top(heights: np.ndarray) -> float:
     """Height of the object's top, robust to a few noisy points above it (99.5th percentile)."""
     return float(np.quantile(heights, 0.995))
-
-
-def _axis_full(found: list[PlannedGrasp], axis: str, cfg: GraspPlannerConfig) -> bool:
-    return sum(g.axis == axis for g in found) >= cfg.candidates_per_axis
 
 
 def _object_hits(boxes: dict[str, OrientedBox], xyz: np.ndarray, cfg: GraspPlannerConfig

@@ -21,9 +21,11 @@ class GraspService(Service):
         # contact midpoint would put the pads behind the object's equator and the fingertips inside its
         # collision box at the pre-grasp; 0.01 m keeps the pads on the contacts (see docs/grasp.md).
         # The antipodal filter on measured normals (not in GeoGrasp) is relaxed as GeoGrasp has it: from the
-        # front, a box turned by 30 degrees shows only one of the two faces a grasp closes on; the hidden
-        # one's extreme point is an edge whose normal is the visible face's, so a strict test leaves no grasp
-        # even though the pads close on both faces (the twin confirms it, docs/orchestrator.md).
+        # arm's side, a box turned by 30 degrees shows only one of the two faces a grasp closes on, and the
+        # relaxed test keeps the observed edge-to-face pairs the arm reaches straight from its base (the twin
+        # checks that the pads close on both faces, docs/orchestrator.md). The planner adds the antipodal
+        # grasps on the seen face and its mirror image (completion.py, inferred_contacts = 1), which the
+        # orchestrator tries when those fail or do not exist (the cream cheese at 30 degrees had none).
         self.config = GraspPlannerConfig(grasp_depth=float(self.settings.options.get("grasp_depth", 0.01)),
                                          max_contact_angle_deg=89.0)
         self.plans = 0
