@@ -13,7 +13,14 @@ Figures (JSON keys):
   horizontal; the table-aligned box axis the planner uses is 0 by construction (the paper's point).
 - ``can_center_error_mm_max``: for the two cans, distance between the turn centre the planner estimated
   (circle fits) and the can's true axis (sim ground truth, evaluation only).
-- ``per_object``: points, grasps found, the kinds, the best rank and its worst contact angle.
+- ``per_object``: points, grasps found, the kinds, the best rank and its worst contact angle, and which
+  hidden sides the planner mirrored in (``completed_axes``, ``n_inferred_points``; services/grasp/completion.py).
+
+- ``turn_survey`` (full run only): every HOPE object at the acquisition's (0.60, 0) turned 0..330° by
+  the twin (3 scan poses per view, static registration's isolated cloud and table), planned with the
+  grasp service's settings: per object the grasps found per turn as "frontal/top_down" counts, and
+  ``views_with_grasp`` (auto mode: frontal, else top-down) out of 12. ``turn_survey_views_with_grasp``
+  sums them (60 = every view of every object).
 
 Clouds: ``services.sim.scenario.simulated_views`` renders one view (3 scan poses) of each HOPE object;
 the frames are back-projected into ``base``, cropped to the object above the table, merged, normals
@@ -24,6 +31,7 @@ the points visible from the same three camera positions kept (Open3D ``hidden_po
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -149,6 +157,30 @@ def _time(points, normals, cfg, repeats) -> tuple[list[float], list[float], Any]
     return wall, cpu, plan
 
 
+def _turn_survey(names: list[str], seed: int) -> dict[str, Any]:
+    """Grasps found at every 30° turn of each object, as the acquisition sees it (see the module doc)."""
+    from services.grasp.service import GraspService
+    from services.registration.static import register_view
+    from services.sim.scenario import simulated_views
+    from services.sim.world import default_object_pose
+
+    service_cfg = GraspService.planner_config(grasp_depth=0.01)
+    out: dict[str, Any] = {}
+    for name in names:
+        counts, with_grasp = [], 0
+        views = simulated_views(name, views=12, scans_per_view=3, profile="ideal", seed=seed,
+                                object_pose=default_object_pose(0.60, 0.0))
+        for frames in views:
+            view = register_view(frames)
+            cloud, table = view.object_cloud, view.table
+            n = [len(plan_grasps(cloud.xyz, cloud.normals, table, replace(service_cfg, mode=mode)).grasps)
+                 for mode in ("frontal", "top_down")]
+            counts.append(f"{n[0]}/{n[1]}")
+            with_grasp += int(max(n) > 0)
+        out[name] = {"turns_deg": list(range(0, 360, 30)), "frontal_top_down": counts, "views_with_grasp": with_grasp}
+    return out
+
+
 def run(quick: bool = False) -> dict[str, Any]:
     from services.sim.catalogue import hope_names
 
@@ -186,11 +218,15 @@ def run(quick: bool = False) -> dict[str, Any]:
             "best_width_m": None if best is None else float(best.width),
             "best_contact_angle_deg": worst_angle,
             "rejections": dict(plan.rejections.counts),
+            "completed_axes": list(plan.completion.get("completed_axes", [])),
+            "n_inferred_points": int(plan.completion.get("n_inferred", 0)),
+            "best_inferred_contacts": None if best is None else int(best.metrics.get("inferred_contacts", 0)),
             "pca_axis_tilt_deg": _pca_tilt_deg(p),
         }
         if name in TRUE_AXES:
             per_object[name]["center_error_mm"] = float(
                 np.linalg.norm(plan.object_center[:2] - TRUE_AXES[name]) * 1e3)
+    survey = {} if quick else _turn_survey(names, seed)
     plan_ms = float(np.median(wall_all))
     base_ms = float(np.median(base_all))
     return {
@@ -214,6 +250,8 @@ def run(quick: bool = False) -> dict[str, Any]:
         "repeats": repeats,
         "cloud_source": source,
         "per_object": per_object,
+        **({"turn_survey": survey,
+            "turn_survey_views_with_grasp": sum(o["views_with_grasp"] for o in survey.values())} if survey else {}),
     }
 
 

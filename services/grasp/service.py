@@ -26,10 +26,14 @@ class GraspService(Service):
         # checks that the pads close on both faces, docs/orchestrator.md). The planner adds the antipodal
         # grasps on the seen face and its mirror image (completion.py, inferred_contacts = 1), which the
         # orchestrator tries when those fail or do not exist (the cream cheese at 30 degrees had none).
-        self.config = GraspPlannerConfig(grasp_depth=float(self.settings.options.get("grasp_depth", 0.01)),
-                                         max_contact_angle_deg=89.0)
+        self.config = self.planner_config(float(self.settings.options.get("grasp_depth", 0.01)))
         self.plans = 0
         self.queryable(keys.GRASP_PLAN, self.plan)
+
+    @staticmethod
+    def planner_config(grasp_depth: float = 0.01) -> GraspPlannerConfig:
+        """The planner settings the service runs with (see setup; the benchmark's turn survey uses them)."""
+        return GraspPlannerConfig(grasp_depth=grasp_depth, max_contact_angle_deg=89.0)
 
     async def plan(self, msg: Message | None, ctx: QueryContext) -> GraspPlanReply:
         if not isinstance(msg, GraspRequest):
