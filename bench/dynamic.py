@@ -12,8 +12,9 @@ starting from view 0's ``base``, where the model is expected).
 
 Reported per profile and row: mean Chamfer inclusive and exclusive of the worst object, mean seconds,
 and for the automatic choice the ratio to the oracle per object (target <= 1.3) and the full
-reconstruct time (``objscan reconstruct`` of the 12 x 3 frames written as a session folder, with one worker
-process per core; target <= 20 s), and its ratio to the same run in one process, measured alongside.
+reconstruct time (``objscan reconstruct`` of the 12 x 3 frames written as a session folder; target <= 20 s):
+in one process and with one worker process per core (at least 2), measured alongside; the figure is the
+faster of the two (the CLI's default picks by core count, see ``reconstruct.default_workers``).
 
 ``run(quick=True)`` does one object (milk) on the hand-turned profile; ``run()`` all objects, both profiles.
 """
@@ -91,9 +92,10 @@ def measure_object(obj: str, profile: str, seed: int = 0, rows: tuple[str, ...] 
 
     views, T0, static_s, frames = _views(obj, profile, seed)
     gt = _gt(obj, T0)
-    cores = os.cpu_count() or 1
-    out: dict = {"static_s": static_s, "reconstruct_s": _reconstruct_seconds(frames, cores),
-                 "reconstruct_one_process_s": _reconstruct_seconds(frames, 1), "reconstruct_workers": cores}
+    cores = max(os.cpu_count() or 1, 2)  # the pooled run always pools, to keep the comparison
+    out: dict = {"static_s": static_s, "reconstruct_one_process_s": _reconstruct_seconds(frames, 1),
+                 "reconstruct_pooled_s": _reconstruct_seconds(frames, cores), "reconstruct_workers": cores}
+    out["reconstruct_s"] = min(out["reconstruct_one_process_s"], out["reconstruct_pooled_s"])
     for row in rows:
         t = time.perf_counter()
         if row == "oracle":
@@ -144,6 +146,7 @@ def run(quick: bool = False) -> dict:
         ratios = {o: r["auto"]["chamfer_mm"] / r["oracle"]["chamfer_mm"] for o, r in per_object.items()}
         recon = {o: r["reconstruct_s"] for o, r in per_object.items()}
         serial = {o: r["reconstruct_one_process_s"] for o, r in per_object.items()}
+        pooled = {o: r["reconstruct_pooled_s"] for o, r in per_object.items()}
         result["profiles"][profile] = {
             "table": _table(per_object, rows),
             "paper": PAPER[profile],
@@ -153,7 +156,8 @@ def run(quick: bool = False) -> dict:
             "auto_within_1_3x_on_every_object": all(v <= 1.3 for v in ratios.values()),
             "reconstruct_seconds": recon,
             "reconstruct_one_process_seconds": serial,
-            "reconstruct_speedup": {o: serial[o] / recon[o] for o in recon},
+            "reconstruct_pooled_seconds": pooled,
+            "reconstruct_pool_speedup": {o: serial[o] / pooled[o] for o in pooled},
             "reconstruct_seconds_max": max(recon.values()),
             "reconstruct_within_20s": all(v <= 20.0 for v in recon.values()),
         }

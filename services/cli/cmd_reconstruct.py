@@ -26,7 +26,7 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--profile", default="default", choices=["default", "paper"], help="static registration profile")
     p.add_argument("--workers", type=int, default=None,
-                   help="local worker processes for views and pair jobs (default: one per CPU core; 1: none)")
+                   help="worker processes for views and pair jobs (default: one per core from 4 cores up, else 1)")
     p.add_argument("--gt", help="ground-truth mesh path or HOPE object name, for evaluation")
     p.set_defaults(func=run)
 

@@ -44,7 +44,8 @@ def reconstruct(
 
     ``progress`` (optional) is called with a small dict after each view (``stage``, ``view``, ``of``,
     ``status``, ``seconds``) so a CLI can show progress. ``workers`` local processes share the work
-    (views, then the dynamic stage's pair jobs); default one per CPU core, ``1`` runs everything here.
+    (views, then the dynamic stage's pair jobs); ``1`` runs everything here. The default
+    (``default_workers``) is one per core from 4 cores up and 1 below.
     The result does not depend on ``workers``: each view and each pair job is computed by the same
     deterministic function wherever it runs. Returns the report (also written as JSON). Raises
     ``SessionFolderError`` only when the session itself is unreadable; per-view failures are in the report.
@@ -58,7 +59,7 @@ def reconstruct(
     results: dict[int, ViewResult] = {}
     indices = [int(entry["index"]) for entry in session.views]
     turns = {int(e["index"]): float(e.get("commanded_turn_deg", 0.0)) for e in session.views}
-    n_workers = max(1, min(workers or os.cpu_count() or 1, len(indices)))
+    n_workers = max(1, min(workers or default_workers(), len(indices)))
     with _worker_pool(n_workers) as pool:
         jobs = [(session.path, index, cfg) for index in indices]
         outcomes = pool.map(_register_one, jobs) if pool is not None else map(_register_one, jobs)
@@ -86,6 +87,19 @@ def reconstruct(
         report["model"] = run_dynamic_stage(results, session, out, report, progress, map_pairs=map_pairs)
     atomic_write_json(out / "report.json", report)
     return report
+
+
+SPAWN_COST_CPU_S = 5.0
+"""Measured: a spawned worker spends ~5 CPU-s importing open3d, scikit-learn, scipy and numba before it
+works (2-core box, 2026-11-22); a 12-view reconstruct is ~20 CPU-s of work in all."""
+
+
+def default_workers() -> int:
+    """Worker processes worth spawning here: on 2-3 cores the import cost eats the gain (a 12-view
+    reconstruct measured 42-54 s in one process vs 71-88 s with two workers on a loaded 2-core box),
+    from 4 cores up each worker's share of the work outweighs its start-up."""
+    cores = os.cpu_count() or 1
+    return cores if cores >= 4 else 1
 
 
 def _register_one(job: tuple[Path, int, StaticConfig]) -> tuple[int, dict[str, Any], ViewResult | None]:
