@@ -73,6 +73,8 @@ class CandidateRegion:
     normals: np.ndarray | None = None
     """Normals estimated from the same neighbourhood as the curvature (in the cloud's frame); None =
     use the input normals."""
+    source: str = "all"
+    """"all": cut from the whole cloud; "observed": from the observed rows only (see candidate_regions)."""
 
 
 def central_slice(frame: ObjectFrame, thickness: float) -> np.ndarray:
@@ -152,10 +154,16 @@ def extreme_point(slice_local: np.ndarray, col: int, side: int, tolerance: float
 
 def candidate_regions(frame: ObjectFrame, fingertip: float, slice_thickness: float, voxel: float,
                       curvature_radius: float, seed_tolerance: float = 0.002, refit_normals: bool = True,
-                      axes: list[tuple[str, int]] | tuple[tuple[str, int], ...] = (("y", 1), ("z", 2))
+                      axes: list[tuple[str, int]] | tuple[tuple[str, int], ...] = (("y", 1), ("z", 2)),
+                      n_observed: int | None = None,
+                      observed_axes: list[tuple[str, int]] | tuple[tuple[str, int], ...] = ()
                       ) -> tuple[list[CandidateRegion], int]:
     """The candidate regions at the min and max end of each of ``axes`` (default y and z: y-min, y-max,
     z-min, z-max); empty list when the slice is empty.
+
+    With ``n_observed`` (rows from there on are inferred points), the regions of ``observed_axes`` are
+    cut a second time from the observed rows alone (source "observed", seeds, crops and curvature
+    neighbourhoods all without inferred points), sharing the slab and the masks' setup with the first cut.
 
     Returns (regions, number of slice points).
     """
@@ -168,24 +176,46 @@ def candidate_regions(frame: ObjectFrame, fingertip: float, slice_thickness: flo
     # every region lies in the slab |x| <= half_x (+ the curvature radius): mask the cloud once
     slab = np.flatnonzero(np.abs(local[:, 0]) <= half[0] + curvature_radius)
     slab_local = local[slab]
-    found, near_all = [], []
-    for axis_name, col in axes:
+    jobs = [(name, col, "all") for name, col in axes]
+    if n_observed is not None and len(observed_axes):
+        jobs += [(name, col, "observed") for name, col in observed_axes]
+        slab_seen = slab < n_observed
+        slice_seen = slice_idx[slice_idx < n_observed]
+    found = []
+    near_masks = {"all": np.zeros(len(slab), bool), "observed": np.zeros(len(slab), bool)}
+    for axis_name, col, source in jobs:
+        seeds = slice_idx if source == "all" else slice_seen
+        if len(seeds) == 0:
+            continue
+        if source == "observed" and not any(f[3].max(initial=-1) >= n_observed for f in found
+                                            if f[0] == axis_name and f[4] == "all"):
+            continue  # the whole-cloud regions of this axis hold no inferred point: same cut
         for side in (-1, 1):
-            seed = int(slice_idx[extreme_point(local[slice_idx], col, side, seed_tolerance)])
+            seed = int(seeds[extreme_point(local[seeds], col, side, seed_tolerance)])
             offset = np.abs(slab_local - local[seed])
-            kept = voxel_thin(slab[np.all(offset <= half, axis=1)], local, voxel)
-            found.append((axis_name, side, seed, kept))
-            near_all.append(slab[np.all(offset <= half + curvature_radius, axis=1)])
-    # one curvature pass for all regions; the neighbourhood is thinned so k neighbours span the whole
-    # radius whatever the density
-    near = voxel_thin(np.unique(np.concatenate(near_all)), local, 0.25 * curvature_radius)
-    all_kept = np.concatenate([f[3] for f in found])
-    curv_all, normals_local = local_surface(local[near], local[all_kept], curvature_radius)
-    normals_all = normals_local @ frame.rotation.T if refit_normals else None
-    regions, start = [], 0
-    for axis_name, side, seed, kept in found:
+            inside = np.all(offset <= half, axis=1)
+            near = np.all(offset <= half + curvature_radius, axis=1)
+            if source == "observed":
+                inside &= slab_seen
+                near &= slab_seen
+            near_masks[source] |= near
+            found.append((axis_name, side, seed, voxel_thin(slab[inside], local, voxel), source))
+    # one curvature pass per source for all its regions; the neighbourhood is thinned so k neighbours
+    # span the whole radius whatever the density
+    curvature: dict[str, tuple[np.ndarray, np.ndarray | None]] = {}
+    for source, mask in near_masks.items():
+        kept = [f[3] for f in found if f[4] == source]
+        if not kept:
+            continue
+        near = voxel_thin(slab[mask], local, 0.25 * curvature_radius)
+        curv, normals_local = local_surface(local[near], local[np.concatenate(kept)], curvature_radius)
+        curvature[source] = (curv, normals_local @ frame.rotation.T if refit_normals else None)
+    regions, starts = [], dict.fromkeys(curvature, 0)
+    for axis_name, side, seed, kept, source in found:
+        start = starts[source]
         span = slice(start, start + len(kept))
-        start += len(kept)
-        regions.append(CandidateRegion(axis_name, side, seed, kept, curv_all[span], np.abs(local[kept, 0]),
-                                       None if normals_all is None else normals_all[span]))
+        starts[source] = start + len(kept)
+        curv, normals = curvature[source]
+        regions.append(CandidateRegion(axis_name, side, seed, kept, curv[span], np.abs(local[kept, 0]),
+                                       None if normals is None else normals[span], source))
     return regions, len(slice_idx)

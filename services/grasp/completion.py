@@ -70,6 +70,12 @@ class Completion:
         return [s.axis for s in self.sides if s.mirrored]
 
     @property
+    def completed_cols(self) -> list[int]:
+        """Box-frame columns of the completed axes (y = 1, z = 2)."""
+        cols = dict(AXES)
+        return [cols[name] for name in self.completed_axes]
+
+    @property
     def incomplete_sides(self) -> list[SideFaces]:
         """Axes left with an end unseen: completion disabled, or no face at either end to mirror."""
         return [s for s in self.sides if s.status in ("hidden", "unseen")]
@@ -102,13 +108,16 @@ def find_side_faces(local: np.ndarray, local_normals: np.ndarray, half_extent: f
 
 def complete_hidden_sides(frame: ObjectFrame, xyz: np.ndarray, normals: np.ndarray, up: np.ndarray, *,
                           band: float, face_angle_deg: float, hidden_ratio: float, min_face_points: int,
-                          enabled: bool = True) -> Completion:
+                          enabled: bool = True, spacing: float = 0.0) -> Completion:
     """Mirror the seen face onto each hidden end of the horizontal region axes (see the module doc).
 
     An end is hidden when it has at most ``hidden_ratio`` times the face points of the other end and
     the other end has at least ``min_face_points``. ``band`` is the minimum depth of the face band
     (a quarter of the half extent when larger, for curved sides). With ``enabled`` False the sides are
-    still assessed (so a plan can say a side was not seen) but nothing is added.
+    still assessed (so a plan can say a side was not seen) but nothing is added. ``spacing`` > 0 keeps
+    about one mirrored point per ``spacing``² of face (an even stride through the face points): the
+    planner thins its regions and curvature neighbourhoods at that scale anyway, and a dense scan's face
+    would otherwise add half as many points again.
     """
     local_normals = normals @ frame.rotation
     cos_face = float(np.cos(np.radians(face_angle_deg)))
@@ -130,9 +139,14 @@ def complete_hidden_sides(frame: ObjectFrame, xyz: np.ndarray, normals: np.ndarr
             status = "hidden"
         elif seen_mask is not None:
             status = "completed"
-            loc = frame.local[seen_mask].copy()
+            seen_rows = np.flatnonzero(seen_mask)
+            if spacing > 0:  # about one point per spacing² of face: a stride, not a voxel sort (it is hot)
+                others = [c for c in range(3) if c != col]
+                area = float(np.prod(frame.extents[others]))
+                seen_rows = seen_rows[:: max(1, int(len(seen_rows) * spacing**2 / max(area, 1e-12)))]
+            loc = frame.local[seen_rows].copy()
             loc[:, col] *= -1.0  # the box centre is the local origin: a sign flip mirrors about its plane
-            nrm = local_normals[seen_mask].copy()
+            nrm = local_normals[seen_rows].copy()
             nrm[:, col] *= -1.0
             extra_local.append(loc)
             extra_normals.append(nrm)

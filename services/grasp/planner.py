@@ -125,14 +125,19 @@ def plan_grasps(cloud_xyz: Any, normals: Any, table: Plane,
     frame = object_frame(inp.xyz, inp.up)
     completion = complete_hidden_sides(frame, inp.xyz, inp.normals, inp.up, band=cfg.side_face_band,
                                        face_angle_deg=cfg.side_face_angle_deg, hidden_ratio=cfg.hidden_side_ratio,
-                                       min_face_points=cfg.min_side_face_points, enabled=cfg.complete_hidden_sides)
+                                       min_face_points=cfg.min_side_face_points, enabled=cfg.complete_hidden_sides,
+                                       spacing=0.25 * cfg.curvature_radius)
     if completion.n_inferred:
         inp = replace(inp, xyz=completion.xyz, normals=completion.normals,
                       heights=completion.xyz @ inp.up + inp.offset, n_observed=completion.n_observed)
         frame = completion.frame(frame)
     rng = np.random.default_rng(cfg.seed)
-    center_local, n_slices = estimate_object_center(frame.local, frame.extents, cfg.slice_thickness,
-                                                    cfg.center_slices, cfg.center_min_points, rng)
+    # the circle fits see the observed points; along a mirrored axis the object is symmetric about the
+    # box's central plane by assumption, so the centre lies on it (an L-shaped section would pull it off)
+    center_local, n_slices = estimate_object_center(frame.local[:completion.n_observed], frame.extents,
+                                                    cfg.slice_thickness, cfg.center_slices,
+                                                    cfg.center_min_points, rng)
+    center_local[completion.completed_cols] = 0.0
     center = frame.to_base(center_local[None, :])[0]
     t1 = time.perf_counter()
     rejections = Rejections(max_examples=cfg.max_examples)
@@ -281,11 +286,12 @@ def _ranked_pairs(xyz: np.ndarray, normals: np.ndarray, up: np.ndarray, frame: O
     """The valid pairs of the y and the z regions as (pair, axis, source), best first per axis and
     source (at most ``max_checks_per_axis`` each); pair-level rejections go to ``rej``.
 
-    Rows from ``n_observed`` on are inferred (mirrored in). Then the regions are cut twice: from the
-    observed points alone (source "observed", the pairs an unaided GeoGrasp would rank) and from the
-    completed cloud (source "completed", kept only for axes whose regions hold inferred points). Each
-    source has its own grasp slots, so completing a hidden side adds grasps and never takes away one
-    the observed points give.
+    Rows from ``n_observed`` on are inferred (mirrored in). The regions are cut from the whole cloud;
+    an axis whose regions hold inferred points gives source "completed", and for those axes the regions
+    cut from the observed points alone (in the same pass) give source "observed", the pairs an unaided
+    GeoGrasp would rank (other axes' pairs are "observed" from the first cut). Each source has
+    its own grasp slots, so completing a hidden side adds grasps and never takes away one the observed
+    points give.
 
     Only the region axes that lie along the table are tried: a pair at the two ends of an axis along the
     table normal joins the object's top to its lowest seen points, a vertical line no horizontal or
@@ -295,34 +301,45 @@ def _ranked_pairs(xyz: np.ndarray, normals: np.ndarray, up: np.ndarray, frame: O
         rej.add("too_few_points", example={"kind": kind, "why": "no box axis along the table"})
         return []
     completed = n_observed is not None and n_observed < len(frame.local)
-    sources = [("observed", ObjectFrame(frame.box, frame.local[:n_observed]) if completed else frame)]
-    if completed:
-        sources.append(("completed", frame))
-    out = []
-    for source, src_frame in sources:
-        regions, n_slice = candidate_regions(src_frame, cfg.gripper.pad_width, cfg.slice_thickness,
-                                             cfg.region_voxel, cfg.curvature_radius,
-                                             refit_normals=cfg.refit_normals, axes=axes)
-        if not regions:
-            rej.add("too_few_points", example={"kind": kind, "source": source, "slice_points": n_slice})
+    # The observed-only cut of a completed axis pairs its hidden end's edge points; their normals lie
+    # more than side_face_angle_deg off the axis (that is what made the end hidden), so they can only
+    # pass an antipodal test looser than that (the grasp service's): otherwise the cut is skipped.
+    observed_cut = completed and cfg.max_contact_angle_deg > cfg.side_face_angle_deg
+    regions, n_slice = candidate_regions(frame, cfg.gripper.pad_width, cfg.slice_thickness,
+                                         cfg.region_voxel, cfg.curvature_radius,
+                                         refit_normals=cfg.refit_normals, axes=axes,
+                                         n_observed=n_observed if observed_cut else None,
+                                         observed_axes=axes if observed_cut else ())
+    if not regions:
+        rej.add("too_few_points", example={"kind": kind, "slice_points": n_slice})
+        return []
+    by_axis: dict[tuple[str, str], list] = {}
+    for r in regions:
+        by_axis.setdefault((r.axis, r.source), []).append(r)
+    out: list[tuple[RankedPair, str, str]] = []
+    for (axis, cut), pair_regions in by_axis.items():
+        a, b = pair_regions
+        inferred = completed and max(a.indices.max(initial=-1), b.indices.max(initial=-1)) >= n_observed
+        if cut == "observed" and not by_axis_has_inferred(by_axis, axis, n_observed):
+            continue  # the whole-cloud cut of this axis holds no inferred point: it already ranked these
+        source = "completed" if inferred else "observed"
+        if min(len(a.indices), len(b.indices)) < cfg.min_region_points or a.seed_index == b.seed_index:
+            rej.add("too_few_points", example={"kind": kind, "axis": axis, "source": source,
+                                               "region_points": [len(a.indices), len(b.indices)]})
             continue
-        by_axis: dict[str, list] = {}
-        for r in regions:
-            by_axis.setdefault(r.axis, []).append(r)
-        for axis, (a, b) in by_axis.items():
-            if source == "completed" and max(a.indices.max(initial=-1), b.indices.max(initial=-1)) < n_observed:
-                continue  # nothing inferred on this axis: the observed source already ranked these pairs
-            if min(len(a.indices), len(b.indices)) < cfg.min_region_points or a.seed_index == b.seed_index:
-                rej.add("too_few_points", example={"kind": kind, "axis": axis, "source": source,
-                                                   "region_points": [len(a.indices), len(b.indices)]})
-                continue
-            ranking = rank_region_pair(a, b, xyz, normals, src_frame.main_axis, up, cfg, cfg.max_checks_per_axis)
-            for reason, count in ranking.rejected_counts.items():
-                ex = ranking.rejected_best[reason]
-                rej.add(reason, count, {"kind": kind, "axis": axis, "source": source, "pairs": count,
-                                        "best_contacts": [xyz[ex.i], xyz[ex.j]], **ex.metrics})
-            out += [(p, axis, source) for p in ranking.best]
+        ranking = rank_region_pair(a, b, xyz, normals, frame.main_axis, up, cfg, cfg.max_checks_per_axis)
+        for reason, count in ranking.rejected_counts.items():
+            ex = ranking.rejected_best[reason]
+            rej.add(reason, count, {"kind": kind, "axis": axis, "source": source, "pairs": count,
+                                    "best_contacts": [xyz[ex.i], xyz[ex.j]], **ex.metrics})
+        out += [(p, axis, source) for p in ranking.best]
     return out
+
+
+def by_axis_has_inferred(by_axis: dict[tuple[str, str], list], axis: str, n_observed: int | None) -> bool:
+    """Whether the whole-cloud regions of ``axis`` hold an inferred point (row >= ``n_observed``)."""
+    regions = by_axis.get((axis, "all"), [])
+    return n_observed is not None and any(r.indices.max(initial=-1) >= n_observed for r in regions)
 
 
 def _order(grasp: PlannedGrasp) -> tuple[float, float]:
