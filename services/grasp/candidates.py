@@ -192,14 +192,16 @@ def candidate_regions(frame: ObjectFrame, fingertip: float, slice_thickness: flo
             continue  # the whole-cloud regions of this axis hold no inferred point: same cut
         for side in (-1, 1):
             seed = int(seeds[extreme_point(local[seeds], col, side, seed_tolerance)])
-            offset = np.abs(slab_local - local[seed])
+            # the band along the axis first (one column), then the full box test on the few points left
+            band = np.flatnonzero(np.abs(slab_local[:, col] - local[seed, col]) <= half[col] + curvature_radius)
+            offset = np.abs(slab_local[band] - local[seed])
             inside = np.all(offset <= half, axis=1)
             near = np.all(offset <= half + curvature_radius, axis=1)
             if source == "observed":
-                inside &= slab_seen
-                near &= slab_seen
-            near_masks[source] |= near
-            found.append((axis_name, side, seed, voxel_thin(slab[inside], local, voxel), source))
+                inside &= slab_seen[band]
+                near &= slab_seen[band]
+            near_masks[source][band[near]] = True
+            found.append((axis_name, side, seed, voxel_thin(slab[band[inside]], local, voxel), source))
     # one curvature pass per source for all its regions; the neighbourhood is thinned so k neighbours
     # span the whole radius whatever the density
     curvature: dict[str, tuple[np.ndarray, np.ndarray | None]] = {}
