@@ -9,6 +9,8 @@ antipodal and a 3-view acquisition failed at view 1 ("grasp_line_not_horizontal 
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -203,3 +205,28 @@ def test_twin_view_of_the_turned_cream_cheese_gets_grasps(twin_cream_cheese_view
     assert abs(line @ across) > np.cos(np.radians(10))
     assert 0.019 < g.width < 0.027
     assert np.linalg.norm(plan.object_center[:2] - T_obj[:2, 3]) < 0.003
+
+
+@pytest.mark.parametrize("turn", [30, 60, 330])
+def test_completion_adds_grasps_and_keeps_the_observed_ones(turn):
+    """With the grasp service's relaxed antipodal filter, a turned carton has observed edge-to-face grasps
+    the arm reaches straight from its base; completion must keep them (same contacts, same ranks, first)
+    and only add the antipodal ones with a mirrored contact."""
+    from services.grasp.service import GraspService
+
+    p, n = _seen(CARTON, float(turn))
+    cfg = GraspService.planner_config()
+    plain = plan_grasps(p, n, S.table_plane(), replace(cfg, complete_hidden_sides=False))
+    done = plan_grasps(p, n, S.table_plane(), cfg)
+    assert plain.grasps
+    seen = [g for g in done.grasps if g.metrics["inferred_contacts"] == 0]
+    added = [g for g in done.grasps if g.metrics["inferred_contacts"] > 0]
+    inferred = [g.metrics["inferred_contacts"] for g in done.grasps]
+    assert inferred == sorted(inferred)  # seen-only grasps lead
+    assert [(g.axis, round(g.rank, 9)) for g in seen] == [(g.axis, round(g.rank, 9)) for g in plain.grasps]
+    for a, b in zip(seen, plain.grasps, strict=True):
+        assert np.allclose(a.contacts, b.contacts)
+    assert added
+    whole = _whole_box(CARTON, float(turn))
+    for g in added:
+        _check_grasp(g, *whole, cfg=GraspPlannerConfig())  # antipodal within 20° on the true faces
