@@ -172,6 +172,20 @@ def test_pair_job_is_picklable_and_runs_in_another_process(milk_prepared):
     assert np.allclose(here.T, there.T, atol=1e-9) and abs(here.fitness - there.fitness) < 1e-9
 
 
+def test_two_pair_jobs_in_two_threads_match_each_run_alone(milk_prepared):
+    """A worker's executor may run two pair jobs at once: each keeps its own downsampling cache."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    prep = milk_prepared
+    jobs = [PairJob(k, s, t, prep.views[s].reduced, prep.views[t].reduced, prep.center, prep.axis, PairConfig())
+            for k, (s, t) in list(enumerate(neighbour_edges(12)))[3:5]]
+    alone = [register_pair(j) for j in jobs]
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        together = list(pool.map(register_pair, jobs))
+    for a, b in zip(alone, together, strict=True):
+        assert np.allclose(a.T, b.T, atol=1e-9) and abs(a.fitness - b.fitness) < 1e-9
+
+
 # ------------------------------------------------------------------------------------ combination
 
 def _fake_results(poses, fitness=None):

@@ -25,6 +25,7 @@ tie that geometry leaves on symmetric objects (cans); both are reported.
 
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass, field
 
@@ -166,7 +167,15 @@ def crop_to_overlap(source: Cloud, target: Cloud, center: np.ndarray, T: np.ndar
     return np.flatnonzero(np.isfinite(ds)), np.flatnonzero(np.isfinite(dt))
 
 
-_DOWN_CACHE: dict[tuple[int, float], tuple[Cloud, o3d.geometry.PointCloud]] = {}
+_LOCAL = threading.local()
+
+
+def _down_cache() -> dict[tuple[int, float], tuple[Cloud, o3d.geometry.PointCloud]]:
+    """This thread's cache: a worker's executor may run two pair jobs at once (two coordinators)."""
+    cache = getattr(_LOCAL, "down", None)
+    if cache is None:
+        cache = _LOCAL.down = {}
+    return cache
 
 
 def _down(cloud: Cloud, voxel: float) -> o3d.geometry.PointCloud:
@@ -177,14 +186,15 @@ def _down(cloud: Cloud, voxel: float) -> o3d.geometry.PointCloud:
     reference to the cloud so its ``id`` cannot be reused while the entry lives.
     """
     key = (id(cloud), float(voxel))
-    hit = _DOWN_CACHE.get(key)
+    cache = _down_cache()
+    hit = cache.get(key)
     if hit is not None and hit[0] is cloud:
         return hit[1]
     pcd = cloud.to_o3d()
     if voxel > 0:
         pcd = pcd.voxel_down_sample(voxel)
     pcd.normalize_normals()
-    _DOWN_CACHE[key] = (cloud, pcd)
+    cache[key] = (cloud, pcd)
     return pcd
 
 
@@ -354,12 +364,12 @@ def register_pair(job: PairJob) -> PairResult:
 
         raise DynamicRegistrationError(f"unknown pair mode {cfg.mode!r}", code="bad_value",
                                        detail={"modes": ["fast", "paper"]})
-    _DOWN_CACHE.clear()
+    _down_cache().clear()
     try:
         scorer = _evaluation_clouds(job, cfg)
         res = _register_paper(job, cfg, scorer) if cfg.mode == "paper" else _register_fast(job, cfg, scorer)
     finally:
-        _DOWN_CACHE.clear()
+        _down_cache().clear()
     res.seconds = time.perf_counter() - t0
     return res
 
