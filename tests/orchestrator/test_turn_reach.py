@@ -8,6 +8,7 @@ planner; the arm is the real kinematics/controller (no Zenoh, no twin).
 from __future__ import annotations
 
 import asyncio
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -17,8 +18,8 @@ from common.messages import PointCloud
 from services.arm.errors import IKError, TrajectoryError
 from services.arm.kinematics import Kinematics, wrist_flip
 from services.arm.motion import cartesian_line_path
-from services.grasp.config import GraspPlannerConfig
 from services.grasp.planner import plan_grasps
+from services.grasp.service import GraspService
 from services.orchestrator.config import AcquisitionConfig, TurnMotion
 from services.orchestrator.machine import Acquisition, State
 from services.orchestrator.planning import TurnPoses, turn_sequences
@@ -40,7 +41,7 @@ def _cameras() -> list[np.ndarray]:
 
 def _plan(mode: str, yaw_deg: float = 0.0):  # noqa: ANN202
     xyz, normals = box(MILK, n=12000, xy=CENTER[:2], yaw_deg=yaw_deg, view_from=_cameras())
-    cfg = GraspPlannerConfig(grasp_depth=0.01, max_contact_angle_deg=89.0, mode=mode)  # the grasp service's
+    cfg = replace(GraspService.planner_config(), mode=mode)  # what the grasp service runs with
     return xyz, normals, plan_grasps(xyz, normals, table_plane(), cfg)
 
 
