@@ -9,6 +9,8 @@ from __future__ import annotations
 import threading
 import time
 import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
@@ -97,6 +99,17 @@ def cell(service_group):
         twin_session.close()
 
 
+@contextmanager
+def _linked(session: zenoh.Session, kin: Kinematics, **options: object) -> Iterator[TwinLinkedDriver]:
+    """A connected twin link, closed afterwards whatever the test did."""
+    driver = TwinLinkedDriver(session, ROBOT, kin, **options)
+    driver.connect(wait_s=20.0)
+    try:
+        yield driver
+    finally:
+        driver.close()
+
+
 def _wait(pred, timeout: float = 20.0) -> bool:  # noqa: ANN001
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -108,9 +121,7 @@ def _wait(pred, timeout: float = 20.0) -> bool:  # noqa: ANN001
 
 def test_a_restarted_twin_gets_the_joints_without_a_move(cell, kin):
     twin, session = cell
-    driver = TwinLinkedDriver(session, ROBOT, kin, retry_window_s=20.0)
-    driver.connect(wait_s=20.0)
-    try:
+    with _linked(session, kin, retry_window_s=20.0) as driver:
         driver.write_setpoint(Q1)
         assert np.array_equal(twin.joints[-1].position, Q1)
         twin.down()  # killed: it forgets everything
@@ -121,15 +132,11 @@ def test_a_restarted_twin_gets_the_joints_without_a_move(cell, kin):
         np.testing.assert_array_equal(last.position, Q1)
         np.testing.assert_allclose(last.T_base_camera, kin.fk(Q1, "camera"))  # it renders from the right pose
         assert driver.resyncs >= 1
-    finally:
-        driver.close()
 
 
 def test_a_set_point_sent_while_the_twin_is_away_lands_when_it_is_back(cell, kin):
     twin, session = cell
-    driver = TwinLinkedDriver(session, ROBOT, kin, retry_window_s=20.0)
-    driver.connect(wait_s=20.0)
-    try:
+    with _linked(session, kin, retry_window_s=20.0) as driver:
         twin.down()
         done = threading.Event()
         errors: list[BaseException] = []
@@ -149,32 +156,22 @@ def test_a_set_point_sent_while_the_twin_is_away_lands_when_it_is_back(cell, kin
         assert done.wait(20.0) and not errors, errors
         np.testing.assert_array_equal(twin.joints[-1].position, Q2)  # newest pose last, whatever re-sent first
         assert driver.retries > 0 and driver.read_gripper() == pytest.approx(0.04)
-    finally:
-        driver.close()
 
 
 def test_a_restarted_arm_starts_where_the_twin_has_it(cell, kin):
     twin, session = cell
     twin.known = JointState(names=list(kin.joint_names), position=Q2.copy())
-    driver = TwinLinkedDriver(session, ROBOT, kin, config=SimDriverConfig())
-    driver.connect(wait_s=20.0)
-    try:
+    with _linked(session, kin, config=SimDriverConfig()) as driver:
         np.testing.assert_array_equal(driver.read_joints(), Q2)
         assert driver.read_gripper() == pytest.approx(0.05)
         np.testing.assert_array_equal(twin.joints[0].position, Q2)  # not a jump to initial_q
-    finally:
-        driver.close()
 
 
 def test_a_twin_refusing_a_set_point_is_not_retried(cell, kin):
     twin, session = cell
-    driver = TwinLinkedDriver(session, ROBOT, kin, retry_window_s=20.0)
-    driver.connect(wait_s=20.0)
-    try:
+    with _linked(session, kin, retry_window_s=20.0) as driver:
         twin.refuse_joints = True
         t0 = time.monotonic()
         with pytest.raises(DriverError) as err:
             driver.write_setpoint(Q1)
         assert err.value.code == "link_failed" and time.monotonic() - t0 < 5.0 and driver.retries == 0
-    finally:
-        driver.close()
