@@ -61,7 +61,7 @@ def reconstruct(
     turns = {int(e["index"]): float(e.get("commanded_turn_deg", 0.0)) for e in session.views}
     n_workers = max(1, min(workers or default_workers(), len(indices)))
     with _worker_pool(n_workers) as pool:
-        jobs = [(session.path, index, cfg) for index in indices]
+        jobs = [(session.path, index, session.scans(index), cfg) for index in indices]
         outcomes = pool.map(_register_one, jobs) if pool is not None else map(_register_one, jobs)
         for k, (index, item, result) in enumerate(outcomes):
             item = {"index": index, "commanded_turn_deg": turns[index], **item}
@@ -89,27 +89,25 @@ def reconstruct(
     return report
 
 
-SPAWN_COST_CPU_S = 5.0
-"""Measured: a spawned worker spends ~5 CPU-s importing open3d, scikit-learn, scipy and numba before it
-works (2-core box, 2026-11-22); a 12-view reconstruct is ~20 CPU-s of work in all."""
-
-
 def default_workers() -> int:
-    """Worker processes worth spawning here: on 2-3 cores the import cost eats the gain (a 12-view
-    reconstruct measured 42-54 s in one process vs 71-88 s with two workers on a loaded 2-core box),
-    from 4 cores up each worker's share of the work outweighs its start-up."""
+    """Worker processes worth spawning here.
+
+    A spawned worker spends ~5 CPU-s importing open3d, scikit-learn, scipy and numba before it works, and a
+    12-view reconstruct is ~20 CPU-s in all: on 2-3 cores the import cost eats the gain (measured 42-54 s in
+    one process vs 71-88 s with two workers on a loaded 2-core box); from 4 cores up each worker's share of
+    the work outweighs its start-up.
+    """
     cores = os.cpu_count() or 1
     return cores if cores >= 4 else 1
 
 
-def _register_one(job: tuple[Path, int, StaticConfig]) -> tuple[int, dict[str, Any], ViewResult | None]:
+def _register_one(job: tuple[Path, int, list[int], StaticConfig]) -> tuple[int, dict[str, Any], ViewResult | None]:
     """One view's static registration (runs in a worker process): its report item and result, or the error."""
-    session_path, index, cfg = job
+    session_path, index, scans, cfg = job
     t0 = time.perf_counter()
     item: dict[str, Any] = {}
     result: ViewResult | None = None
     try:
-        scans = read_session(session_path).scans(index)
         if not scans:
             raise ObjscanError(f"view {index} has no complete scan", code="no_scans")
         frames = [read_scan(session_path, index, j) for j in scans]
