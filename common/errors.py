@@ -38,6 +38,14 @@ class RemoteError(ObjscanError):
 
     code = "remote_error"
 
+    @property
+    def transient(self) -> bool:
+        """The service answered, but one it depends on is going away or not back yet: worth sending again."""
+        return self.code in TRANSIENT_REMOTE_CODES
+
+
+TRANSIENT_REMOTE_CODES = frozenset({"shutdown", "unavailable", "timeout"})
+
 
 class ServiceUnavailable(ObjscanError):
     """No live service answered a request (nothing declared the key, or it timed out)."""

@@ -42,9 +42,6 @@ from services.arm.kinematics import Kinematics
 
 log = logging.getLogger("objscan.arm")
 
-#: RemoteError codes meaning "the twin is going away or not ready", worth sending again.
-_TRANSIENT_REMOTE = ("shutdown", "unavailable", "timeout")
-
 
 class TwinLinkedDriver(SimArmDriver):
     """The sim driver wired to the twin: joints with true poses out, measured gripper opening back."""
@@ -74,7 +71,7 @@ class TwinLinkedDriver(SimArmDriver):
             try:
                 return request_sync(self._session, keys.sim(self._robot, op), msg, timeout=timeout or self._timeout)
             except (ServiceUnavailable, RemoteError) as exc:
-                transient = isinstance(exc, ServiceUnavailable) or exc.code in _TRANSIENT_REMOTE
+                transient = isinstance(exc, ServiceUnavailable) or exc.transient
                 if not transient or time.monotonic() + delay > deadline or self._closing.is_set():
                     raise
                 self.retries += 1

@@ -80,24 +80,20 @@ class Cell:
                 # it at session start); after that it is a twin restarting, worth waiting for
                 if time.monotonic() > deadline or (key.endswith("/sim/world") and not self.twin_seen):
                     raise
-                self.retries += 1
-                event(log, "service unavailable; retrying", logging.WARNING, key=key, code=exc.code)
-                await asyncio.sleep(delay)
-                delay = min(delay * 2, 5.0)
-                continue
+                why, code = "service unavailable", exc.code
             except RemoteError as exc:
                 # the service answered but one it depends on is gone (e.g. the camera's twin restarting)
-                if exc.code not in ("shutdown", "unavailable", "timeout") or time.monotonic() > deadline:
+                if not exc.transient or time.monotonic() > deadline:
                     raise
-                self.retries += 1
-                event(log, "a service behind the reply is unavailable; retrying", logging.WARNING, key=key,
-                      code=exc.code)
-                await asyncio.sleep(delay)
-                delay = min(delay * 2, 5.0)
-                continue
-            if self.tap is not None:
-                self.tap(key, msg, reply, t0, time.time())
-            return reply
+                why, code = "a service behind the reply is unavailable", exc.code
+            else:
+                if self.tap is not None:
+                    self.tap(key, msg, reply, t0, time.time())
+                return reply
+            self.retries += 1
+            event(log, f"{why}; retrying", logging.WARNING, key=key, code=code)
+            await asyncio.sleep(delay)
+            delay = min(delay * 2, 5.0)
 
     async def move(self, kind: str, *, target: np.ndarray | None = None, q: np.ndarray | None = None,
                    frame: str = "gripper", speed: float = 0.5, free_roll: bool = False,
