@@ -82,10 +82,13 @@ class Cell:
                     raise
                 why, code = "service unavailable", exc.code
             except RemoteError as exc:
-                # the service answered but one it depends on is gone (e.g. the camera's twin restarting)
-                if not exc.transient or time.monotonic() > deadline:
+                # the service answered but one it depends on is gone (e.g. the camera's twin restarting), or
+                # the arm is still finishing a motion an earlier orchestrator started (it refuses, not queues)
+                if not (exc.transient or exc.code == "busy") or time.monotonic() > deadline:
                     raise
-                why, code = "a service behind the reply is unavailable", exc.code
+                why = "the arm is still finishing a motion" if exc.code == "busy" else \
+                    "a service behind the reply is unavailable"
+                code = exc.code
             else:
                 if self.tap is not None:
                     self.tap(key, msg, reply, t0, time.time())

@@ -155,15 +155,17 @@ class Acquisition:
     async def run(self) -> dict[str, Any]:
         handlers = {State.LOCATE: self.locate, State.SCAN: self.scan, State.REGISTER: self.register,
                     State.PLAN_GRASP: self.plan_grasp, State.TURN: self.turn, State.MODEL: self.model}
-        if self.state == State.STOPPED:  # resuming after an e-stop
+        after_estop = self.state == State.STOPPED
+        if after_estop:  # resuming after an e-stop
             self.j["state"] = self.j.get("stopped_in", State.SCAN.value)
-            await self.cell.reset_estop()
         if self.state in (State.FAILED, State.DONE):
             return self.status()
         self.j["status"] = "running"
-        await self._prepare_cell()
         self._persist()
         try:
+            if after_estop:
+                await self.cell.reset_estop()
+            await self._prepare_cell()
             while self.state not in TERMINAL:
                 if self.stop_requested.is_set():
                     raise asyncio.CancelledError
@@ -182,6 +184,11 @@ class Acquisition:
             self.j["error"] = {"code": exc.code, "message": exc.message, "state": self.j["state"]}
             self.j["state"], self.j["status"] = State.FAILED.value, "failed"
             self.decide("failed", code=exc.code, message=exc.message)
+            await self._park()
+        except Exception as exc:  # a bug must end the session visibly, not leave it 'running' forever
+            self.j["error"] = {"code": "internal", "message": f"{type(exc).__name__}: {exc}", "state": self.j["state"]}
+            self.j["state"], self.j["status"] = State.FAILED.value, "failed"
+            self.decide("failed", code="internal", message=repr(exc))
             await self._park()
         self._persist()
         return self.status()
@@ -211,6 +218,8 @@ class Acquisition:
                 await step()
             except ObjscanError as exc:
                 self.decide("park step failed", code=exc.code, message=exc.message)
+            except Exception as exc:  # parking is best effort: every step is tried, whatever the last did
+                self.decide("park step failed", code="internal", message=repr(exc))
 
     # -------------------------------------------------------------------------------- states
     async def locate(self) -> State:

@@ -9,6 +9,7 @@ import asyncio
 import numpy as np
 import pytest
 
+from common.api import GripperResult
 from common.errors import RemoteError, ServiceUnavailable
 from common.messages import Intrinsics, Ok, RGBDFrame
 from services.orchestrator.cell import Cell
@@ -76,3 +77,11 @@ def test_sim_world_silence_means_no_twin_until_a_twin_answered_then_a_restart():
     script.failures["world"] = [ServiceUnavailable("twin restarting")]
     assert asyncio.run(cell.sim("gt_points")) == {"armed": True}  # waited for the restarted twin
     assert cell.retries == 1
+
+
+def test_a_busy_arm_is_waited_for_a_resumed_orchestrator_finds_the_old_motion_running():
+    done = GripperResult(opening=0.1, holding=False)
+    script = Script({"gripper": [RemoteError("another motion is running", code="busy")] * 2}, {"gripper": done})
+    cell = Cell(script, "r0", retry_window_s=30)
+    assert asyncio.run(cell.gripper(0.1)) is done
+    assert cell.retries == 2 and len(script.calls) == 3
