@@ -94,6 +94,24 @@ def _bin_header(n: int) -> bytes:
     return struct.pack(">BI", 0xC6, n)
 
 
+_ARRAY_HEAD = _PACK.pack_map_header(3) + _PACK.pack("nd")  # an array is the map {nd: dtype, s: shape, b: bytes}
+_SHAPE_KEY = _PACK.pack("s")
+_DATA_KEY = _PACK.pack("b")
+_LAYOUTS: dict[type, tuple[bytes, list[tuple[str, bytes]]]] = {}
+
+
+def _message_layout(cls: type[Message]) -> tuple[bytes, list[tuple[str, bytes]]]:
+    """A message class's constant bytes, packed once: the map header with ``type`` and ``v``, and each
+    field's packed name (encoding a frame is then mostly its one copy of the pixels)."""
+    layout = _LAYOUTS.get(cls)
+    if layout is None:
+        fields = dataclasses.fields(cls)  # type: ignore[arg-type]
+        head = b"".join((_PACK.pack_map_header(len(fields) + 2), _PACK.pack("type"), _PACK.pack(cls.__name__),
+                         _PACK.pack("v"), _PACK.pack(cls.VERSION)))
+        layout = _LAYOUTS[cls] = (head, [(f.name, _PACK.pack(f.name)) for f in fields])
+    return layout
+
+
 def _emit(value: Any, out: list[Any]) -> None:
     """Append the msgpack encoding of ``value`` to ``out`` as chunks.
 
@@ -101,24 +119,15 @@ def _emit(value: Any, out: list[Any]) -> None:
     final ``b"".join``. The result is standard msgpack that any decoder reads.
     """
     if isinstance(value, Message):
-        fields = dataclasses.fields(value)  # type: ignore[arg-type]
-        out.append(_PACK.pack_map_header(len(fields) + 2))
-        out.append(_PACK.pack("type"))
-        out.append(_PACK.pack(type(value).__name__))
-        out.append(_PACK.pack("v"))
-        out.append(_PACK.pack(type(value).VERSION))
-        for f in fields:
-            out.append(_PACK.pack(f.name))
-            _emit(getattr(value, f.name), out)
+        head, fields = _message_layout(type(value))
+        out.append(head)
+        for name, key in fields:
+            out.append(key)
+            _emit(getattr(value, name), out)
     elif isinstance(value, np.ndarray):
         arr = np.ascontiguousarray(value.astype(value.dtype.newbyteorder("<"), copy=False))
-        out.append(_PACK.pack_map_header(3))
-        out.append(_PACK.pack("nd"))
-        out.append(_PACK.pack(arr.dtype.str))
-        out.append(_PACK.pack("s"))
-        out.append(_PACK.pack(list(arr.shape)))
-        out.append(_PACK.pack("b"))
-        out.append(_bin_header(arr.nbytes))
+        out.append(b"".join((_ARRAY_HEAD, _PACK.pack(arr.dtype.str), _SHAPE_KEY, _PACK.pack(list(arr.shape)),
+                             _DATA_KEY, _bin_header(arr.nbytes))))
         if arr.nbytes:
             out.append(memoryview(arr).cast("B"))
     elif isinstance(value, dict):
@@ -182,13 +191,14 @@ def _from_wire(raw: Any, path: str, expected: type[Message] | None = None) -> Me
         raise WireError(f"{type_name} schema version {version!r} is not supported (expected {cls.VERSION})",
                         code="unsupported_version", detail={"path": path or "/"})
     kwargs: dict[str, Any] = {}
-    for name, decoder, required in _plan(cls):
-        if name not in raw:
+    for name, suffix, decoder, required in _plan(cls):
+        value = raw.get(name, _ABSENT)
+        if value is _ABSENT:
             if required:
                 raise WireError(f"missing field {name!r} in {type_name}", code="missing_field",
-                                detail={"path": f"{path}/{name}"})
+                                detail={"path": path + suffix})
             continue
-        kwargs[name] = decoder(raw[name], f"{path}/{name}")
+        kwargs[name] = decoder(value, path + suffix)
     msg = cls(**kwargs)
     check = getattr(msg, "validate", None)
     if check is not None:
@@ -197,18 +207,19 @@ def _from_wire(raw: Any, path: str, expected: type[Message] | None = None) -> Me
 
 
 Decoder = Callable[[Any, str], Any]
-_PLANS: dict[type, list[tuple[str, Decoder, bool]]] = {}
+_PLANS: dict[type, list[tuple[str, str, Decoder, bool]]] = {}
+_ABSENT = object()
 
 
-def _plan(cls: type[Message]) -> list[tuple[str, Decoder, bool]]:
-    """Per-class list of (field, decoder, required), built once from the type hints."""
+def _plan(cls: type[Message]) -> list[tuple[str, str, Decoder, bool]]:
+    """Per-class list of (field, its path suffix, decoder, required), built once from the type hints."""
     plan = _PLANS.get(cls)
     if plan is None:
         hints = typing.get_type_hints(cls)
         plan = []
         for f in dataclasses.fields(cls):  # type: ignore[arg-type]
             required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
-            plan.append((f.name, _decoder_for(hints[f.name], f.metadata.get("array")), required))
+            plan.append((f.name, "/" + f.name, _decoder_for(hints[f.name], f.metadata.get("array")), required))
         _PLANS[cls] = plan
     return plan
 
@@ -308,7 +319,7 @@ def _decode_free(value: Any, path: str) -> Any:
     if isinstance(value, dict):
         if "type" in value and "v" in value and isinstance(value.get("type"), str):
             return _from_wire(value, path)
-        if set(value) == {"nd", "s", "b"}:
+        if value.keys() == _ARRAY_KEYS:
             return _decode_array(value, None, path)
         return {k: _decode_free(v, f"{path}/{k}") for k, v in value.items()}
     if isinstance(value, list):
@@ -318,18 +329,33 @@ def _decode_free(value: Any, path: str) -> Any:
     return value
 
 
-def _decode_array(value: Any, spec: ArraySpec | None, path: str) -> np.ndarray:
-    if not isinstance(value, dict) or set(value) != {"nd", "s", "b"}:
-        raise _bad("bad_type", "expected an array map {nd, s, b}", path)
-    dtype_str, shape, data = value["nd"], value["s"], value["b"]
-    if not isinstance(dtype_str, str) or not isinstance(shape, list) or not isinstance(data, (bytes, memoryview)):
-        raise _bad("bad_type", "array map has wrong member types", path)
+_ARRAY_KEYS = frozenset({"nd", "s", "b"})
+_ALLOWED_DTYPES: dict[str, np.dtype] = {}  # dtype strings already parsed and allowed (a few: '<f4', '|u1', ...)
+
+
+def _wire_dtype(dtype_str: str, path: str) -> np.dtype:
+    """The numpy dtype a wire ``nd`` names, if it is a plain number type; parsed once per distinct string."""
+    dtype = _ALLOWED_DTYPES.get(dtype_str)
+    if dtype is not None:
+        return dtype
     try:
         dtype = np.dtype(dtype_str)
     except Exception:  # TypeError, but also SyntaxError for ",f4" and ValueError (fuzzing finding)
         raise _bad("bad_dtype", f"unknown dtype {dtype_str!r}", path) from None
     if dtype.kind not in "biuf" or dtype.hasobject:
         raise _bad("bad_dtype", f"dtype {dtype_str!r} is not allowed", path)
+    if len(_ALLOWED_DTYPES) < 64:  # bounded: a hostile sender cycling spellings cannot grow it
+        _ALLOWED_DTYPES[dtype_str] = dtype
+    return dtype
+
+
+def _decode_array(value: Any, spec: ArraySpec | None, path: str) -> np.ndarray:
+    if not isinstance(value, dict) or value.keys() != _ARRAY_KEYS:
+        raise _bad("bad_type", "expected an array map {nd, s, b}", path)
+    dtype_str, shape, data = value["nd"], value["s"], value["b"]
+    if not isinstance(dtype_str, str) or not isinstance(shape, list) or not isinstance(data, (bytes, memoryview)):
+        raise _bad("bad_type", "array map has wrong member types", path)
+    dtype = _wire_dtype(dtype_str, path)
     if spec is not None and dtype.str != spec.dtype:
         raise _bad("bad_dtype", f"expected dtype {spec.dtype}, got {dtype.str}", path,
                    expected=spec.dtype, got=dtype.str)
