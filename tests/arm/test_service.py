@@ -106,3 +106,35 @@ def test_estop_over_zenoh_halts_a_running_motion(arm_cell):
     assert err.value.code == "estop_latched"
     request_sync(s, keys.arm(ROBOT, "stop"), Request(params={"reset": True}), timeout=5)
     request_sync(s, keys.arm(ROBOT, "move"), MoveRequest(kind="joints", q=home, speed_scale=0.5), timeout=120)
+
+
+def test_a_second_command_while_moving_is_refused_busy_and_the_orchestrators_cell_waits_it_out(arm_cell):
+    """What a resumed orchestrator meets when the killed one left the arm moving (the CI failure of session 2):
+    the arm refuses, it does not queue; the orchestrator's ``Cell`` retries ``busy`` until the motion ends."""
+    import asyncio
+
+    from common.api import GripperRequest, GripperResult
+    from common.client import request
+    from services.orchestrator.cell import Cell
+
+    s = arm_cell.session
+    home = request_sync(s, keys.arm(ROBOT, "state"), timeout=10).position.copy()
+    goal = home.copy()
+    goal[0] += 0.6
+    done: dict[str, object] = {}
+    t = threading.Thread(target=lambda: done.update(reply=request_sync(
+        s, keys.arm(ROBOT, "move"), MoveRequest(kind="joints", q=goal, speed_scale=0.1), timeout=120)))
+    t.start()
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not request_sync(s, keys.arm(ROBOT, "state"), timeout=10).moving:
+        time.sleep(0.02)
+    with pytest.raises(RemoteError) as err:
+        request_sync(s, keys.arm(ROBOT, "gripper"), GripperRequest(opening=0.08), timeout=30)
+    assert err.value.code == "busy"
+
+    cell = Cell(lambda key, msg, timeout: request(s, key, msg, timeout=timeout), ROBOT, retry_window_s=60)
+    result = asyncio.run(cell.gripper(0.08))
+    t.join(60)
+    assert isinstance(result, GripperResult) and cell.retries >= 1
+    assert isinstance(done.get("reply"), MoveResult)  # the first motion finished undisturbed
+    request_sync(s, keys.arm(ROBOT, "move"), MoveRequest(kind="joints", q=home, speed_scale=0.5), timeout=120)
