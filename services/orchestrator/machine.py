@@ -181,17 +181,18 @@ class Acquisition:
             self.j["state"], self.j["status"] = State.STOPPED.value, "stopped"
             self.decide("stopped", reason="stop requested")
         except ObjscanError as exc:
-            self.j["error"] = {"code": exc.code, "message": exc.message, "state": self.j["state"]}
-            self.j["state"], self.j["status"] = State.FAILED.value, "failed"
-            self.decide("failed", code=exc.code, message=exc.message)
-            await self._park()
+            await self._fail(exc.code, exc.message)
         except Exception as exc:  # a bug must end the session visibly, not leave it 'running' forever
-            self.j["error"] = {"code": "internal", "message": f"{type(exc).__name__}: {exc}", "state": self.j["state"]}
-            self.j["state"], self.j["status"] = State.FAILED.value, "failed"
-            self.decide("failed", code="internal", message=repr(exc))
-            await self._park()
+            await self._fail("internal", f"{type(exc).__name__}: {exc}")
         self._persist()
         return self.status()
+
+    async def _fail(self, code: str, message: str) -> None:
+        """End the session ``failed`` with the reason in the journal, and park the arm."""
+        self.j["error"] = {"code": code, "message": message, "state": self.j["state"]}
+        self.j["state"], self.j["status"] = State.FAILED.value, "failed"
+        self.decide("failed", code=code, message=message)
+        await self._park()
 
     async def _prepare_cell(self) -> None:
         """First start: reset the twin to this session's object/profile/seed (sim cells only)."""
