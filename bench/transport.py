@@ -11,7 +11,6 @@
 
 from __future__ import annotations
 
-import socket
 import statistics
 import time
 from dataclasses import replace
@@ -70,23 +69,12 @@ def roundtrip_figures(repeats: int) -> dict[str, float]:
         group.settings = ZenohSettings(mode="peer", connect=[group.endpoint])
         peer_env = {"OBJSCAN_ZENOH_MODE": "peer", "OBJSCAN_ZENOH_LISTEN": group.endpoint, "OBJSCAN_ZENOH_CONNECT": ""}
         group.start(replace(spec, env=peer_env))
-        _wait_listening(group.port)
+        group.wait_listening(spec.label(), timeout=30)
         group.wait_alive(["bench-frame"], timeout=30)
         direct = _request_times(group, repeats)
     return {"roundtrip_ms_median": statistics.median(routed), "roundtrip_ms_p90": float(np.percentile(routed, 90)),
             "roundtrip_direct_ms_median": statistics.median(direct),
             "roundtrip_direct_ms_p90": float(np.percentile(direct, 90)), "roundtrip_samples": repeats}
-
-
-def _wait_listening(port: int, timeout: float = 30.0) -> None:
-    """The peer service listens before the caller connects (a peer does not retry a refused connect)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        with socket.socket() as s:
-            if s.connect_ex(("127.0.0.1", port)) == 0:
-                return
-        time.sleep(0.05)
-    raise TimeoutError(f"the frame server did not listen on port {port}")
 
 
 def run(quick: bool = False) -> dict[str, Any]:

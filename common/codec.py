@@ -94,7 +94,9 @@ def _bin_header(n: int) -> bytes:
     return struct.pack(">BI", 0xC6, n)
 
 
-_ARRAY_HEAD = _PACK.pack_map_header(3) + _PACK.pack("nd")  # an array is the map {nd: dtype, s: shape, b: bytes}
+# an array on the wire is the map {nd: dtype string, s: shape list, b: raw little-endian bytes}
+_ARRAY_KEYS = frozenset({"nd", "s", "b"})
+_ARRAY_HEAD = _PACK.pack_map_header(3) + _PACK.pack("nd")
 _SHAPE_KEY = _PACK.pack("s")
 _DATA_KEY = _PACK.pack("b")
 _LAYOUTS: dict[type, tuple[bytes, list[tuple[str, bytes]]]] = {}
@@ -329,7 +331,6 @@ def _decode_free(value: Any, path: str) -> Any:
     return value
 
 
-_ARRAY_KEYS = frozenset({"nd", "s", "b"})
 _ALLOWED_DTYPES: dict[str, np.dtype] = {}  # dtype strings already parsed and allowed (a few: '<f4', '|u1', ...)
 
 

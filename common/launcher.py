@@ -82,17 +82,23 @@ class ServiceGroup:
 
     def start_router(self) -> None:
         self.start(ProcessSpec("common.router", ["--listen", self.endpoint], name="router"))
-        deadline = time.monotonic() + 15
+        self.wait_listening("router", timeout=15)
+
+    def wait_listening(self, label: str, timeout: float) -> None:
+        """Wait until process ``label`` accepts TCP connections on the group's port (a router, or a peer
+        that listens: a peer does not retry a refused connect, so the caller connects only after this)."""
         import socket
 
+        deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             with socket.socket() as s:
                 if s.connect_ex(("127.0.0.1", self.port)) == 0:
                     return
-            if self.procs["router"].poll() is not None:
-                raise RuntimeError("the zenoh router exited at start-up (port in use?)")
+            if self.procs[label].poll() is not None:
+                raise RuntimeError(f"{label} exited at start-up (port in use?)"
+                                   + (f"; see {self.log_dir / (label + '.log')}" if self.log_dir else ""))
             time.sleep(0.05)
-        raise TimeoutError(f"router did not listen on {self.endpoint}")
+        raise TimeoutError(f"{label} did not listen on port {self.port}")
 
     @property
     def session(self) -> zenoh.Session:

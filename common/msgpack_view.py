@@ -142,21 +142,10 @@ def _read_map(view: memoryview, pos: int, n: int, depth: int) -> tuple[dict[str,
     if n > MAX_CONTAINER or 2 * n > len(view) - pos:
         raise ValueError(f"map of {n} entries cannot fit")
     out: dict[str, Any] = {}
-    size = len(view)
     for _ in range(n):
-        b = view[pos]
-        if 0xA0 <= b <= 0xBF:  # fixstr key, read here: keys are half of all items (the hot path)
-            end = pos + 1 + (b & 0x1F)
-            if end > size:
-                raise ValueError(f"truncated string at offset {pos + 1}")
-            try:
-                key = str(view[pos + 1:end], "utf-8")
-            except UnicodeDecodeError:
-                raise ValueError(f"invalid UTF-8 string at offset {pos + 1}") from None
-            pos = end
-        else:
-            key, pos = _read(view, pos, depth + 1)
-            if not isinstance(key, str):
-                raise ValueError("map keys must be strings")
-        out[key], pos = _read(view, pos, depth + 1)
+        key, pos = _read(view, pos, depth + 1)
+        if not isinstance(key, str):
+            raise ValueError("map keys must be strings")
+        value, pos = _read(view, pos, depth + 1)
+        out[key] = value
     return out, pos

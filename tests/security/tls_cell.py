@@ -7,8 +7,6 @@ own certificate through ``OBJSCAN_ZENOH_TLS_*``.
 
 from __future__ import annotations
 
-import socket
-import time
 from pathlib import Path
 
 import zenoh
@@ -52,15 +50,7 @@ class TlsCell:
         if self.router_config is not None:
             args += ["--config", str(self.router_config)]
         self.group.start(ProcessSpec("tests.security.tls_router", args, name="router"))
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            with socket.socket() as s:
-                if s.connect_ex(("127.0.0.1", self.port)) == 0:
-                    return
-            if self.group.procs["router"].poll() is not None:
-                raise RuntimeError(f"TLS router exited; see {self.root / 'logs' / 'router.log'}")
-            time.sleep(0.05)
-        raise TimeoutError("TLS router did not listen")
+        self.group.wait_listening("router", timeout)
 
     def launch(self, services: list[str], timeout: float = 120.0) -> None:
         specs = cell_specs(services)
