@@ -61,3 +61,9 @@ class ReadOnlyDriver(ArmError):
     """The driver reports recorded states and cannot move (replay)."""
 
     code = "read_only"
+
+
+class RobotConfigError(ArmError):
+    """A robot configuration (YAML or dataclass) is invalid; ``detail`` names the key and what was wrong."""
+
+    code = "bad_robot_config"

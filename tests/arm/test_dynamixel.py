@@ -1,4 +1,7 @@
-"""The DYNAMIXEL driver against an emulated Protocol 2.0 bus on a pty: packets, read-back, faults."""
+"""The DYNAMIXEL driver against an emulated Protocol 2.0 bus on a pty: packets, read-back, faults.
+
+These run an X-series arm (XM430, IDs 1-6, gripper ID 7): the driver keeps supporting X servos beside the
+DYNAMIXEL-P ones PAPRAS is built from (tests/arm/test_dynamixel_p.py)."""
 
 from __future__ import annotations
 
@@ -12,10 +15,10 @@ import pytest
 from dynamixel_sdk import PacketHandler
 
 from services.arm.drivers.base import execute
-from services.arm.drivers.dynamixel import DynamixelArmDriver, DynamixelConfig, JointServoConfig
+from services.arm.drivers.dynamixel import DynamixelArmDriver, DynamixelConfig, GripperServoConfig, JointServoConfig
 from services.arm.drivers.dynamixel import protocol as p
 from services.arm.drivers.dynamixel.control_table import RH_P12_RN_A, X_SERIES
-from services.arm.drivers.dynamixel.emulator import DynamixelBusEmulator
+from services.arm.drivers.dynamixel.emulator import DynamixelBusEmulator, rh_p12_rn_gripper, xm_arm_servos
 from services.arm.errors import DriverError
 from services.arm.motion import plan_joint_motion
 
@@ -24,12 +27,14 @@ pytestmark = pytest.mark.timeout(120)
 
 @pytest.fixture
 def bus():
-    with DynamixelBusEmulator() as emu:
+    with DynamixelBusEmulator([*xm_arm_servos(), rh_p12_rn_gripper(7)]) as emu:
         yield emu
 
 
 def make_driver(emu, **kw) -> DynamixelArmDriver:
-    return DynamixelArmDriver(DynamixelConfig(port=emu.port, baudrate=1_000_000, **kw))
+    kw.setdefault("joints", [JointServoConfig(i) for i in range(1, 7)])
+    kw.setdefault("gripper", GripperServoConfig(dxl_id=7))
+    return DynamixelArmDriver(DynamixelConfig(port=emu.port, baudrate=1_000_000, home=(0.0,) * 6, **kw))
 
 
 def test_crc_and_stuffing_match_the_sdk():

@@ -1,16 +1,25 @@
-"""DYNAMIXEL driver (dynamixel-sdk, Protocol 2.0): sync write of goal positions, sync read of present ones.
+"""DYNAMIXEL driver (dynamixel-sdk, Protocol 2.0): X and P series in one driver, chosen per joint by model.
 
-Every set-point is a GroupSyncWrite of Goal Position followed by a GroupSyncRead of Present Position, so
-a servo that stops answering is noticed within one cycle; every ``error_check_every`` cycles Hardware
-Error Status is read too. Either, or a tracking error beyond ``max_tracking_error``, raises
-``DriverError`` (the controller then stops the motion). Gripper commands use single writes with status
-replies, whose error byte is checked.
+Connect: ping every servo and compare the model number it reports with the configured model (a mismatch
+is refused, naming the ID, the model expected and the model found); read Hardware Error Status (a servo
+in error is refused, with the faults named); write the EEPROM settings while torque is off (operating
+mode, homing offset, return delay); write the profiles; read the present positions, make them the goals,
+and only then turn torque on, so the arm neither jumps nor falls.
+
+Every set-point is a GroupSyncWrite of Goal Position followed by a GroupSyncRead of Present Position (one
+pair per control-table layout on the bus), so a servo that stops answering is noticed within one cycle;
+every ``error_check_every`` cycles Hardware Error Status is read too. Either, or a tracking error beyond
+``max_tracking_error``, raises ``DriverError`` (the controller then stops the motion). ``settle`` ends a
+motion: every joint must come within ``settle_tolerance`` of the last set-point, else ``tracking_error``
+naming the joint and its error. E-stop (``stop``) holds: goal = present, torque on. ``close`` follows the
+configured ``shutdown`` policy (``hold``: torque stays on; ``relax``: torque off).
 """
 
 from __future__ import annotations
 
-import math
 import threading
+import time
+from dataclasses import dataclass
 
 import numpy as np
 from dynamixel_sdk import (
@@ -22,7 +31,8 @@ from dynamixel_sdk import (
 )
 
 from services.arm.drivers.base import ArmDriver
-from services.arm.drivers.dynamixel.config import DynamixelConfig
+from services.arm.drivers.dynamixel.config import DynamixelConfig, JointServoConfig
+from services.arm.drivers.dynamixel.control_table import ControlTable, describe_hardware_error, model_name
 from services.arm.errors import DriverError
 
 ALERT_BIT = 0x80
@@ -36,19 +46,35 @@ def _signed32(v: int) -> int:
     return v - (1 << 32) if v > 0x7FFFFFFF else v
 
 
+@dataclass
+class _Group:
+    """Joints sharing one control-table layout: one sync write of goals, one sync read of positions."""
+
+    table: ControlTable
+    index: list[int]  # joint indices (0..5)
+    write: GroupSyncWrite
+    read: GroupSyncRead
+    errors: GroupSyncRead
+
+
 class DynamixelArmDriver(ArmDriver):
     name = "dynamixel"
 
     def __init__(self, config: DynamixelConfig | None = None):
         self.config = config or DynamixelConfig()
-        if len(self.config.joints) != 6:
-            raise ValueError("the PAPRAS arm needs 6 joint servos")
-        self._ids = [j.dxl_id for j in self.config.joints]
+        self._joints: list[JointServoConfig] = list(self.config.joints)
+        self._ids = [j.dxl_id for j in self._joints]
         self._port: PortHandler | None = None
         self._ph = PacketHandler(2.0)
         self._lock = threading.RLock()
         self._cycle = 0
+        self._groups: list[_Group] = []
         self._last_goal: np.ndarray | None = None
+        self.servo_info: dict[int, dict] = {}  # id -> {"model", "model_number", "firmware"} read at connect
+
+    @property
+    def home_q(self) -> np.ndarray:
+        return np.asarray(self.config.home, dtype=np.float64)
 
     # ------------------------------------------------------------------ link
     def _check(self, result: int, error: int, what: str, dxl_id: int) -> None:
@@ -58,18 +84,26 @@ class DynamixelArmDriver(ArmDriver):
                 code="servo_silent",
                 detail={"id": dxl_id, "what": what},
             )
-        if error:
+        if error & ~ALERT_BIT:
             raise DriverError(
                 f"servo {dxl_id} reported an error on {what}: {self._ph.getRxPacketError(error)}",
                 code="servo_error",
                 detail={"id": dxl_id, "what": what, "error": int(error)},
             )
 
-    def _retry(self, fn, *args):
+    def _retry(self, fn, *args):  # noqa: ANN001, ANN202 - any SDK call returning (..., result, error)
         for attempt in range(self.config.retries + 1):
             out = fn(*args)
             if out[-2] == COMM_SUCCESS or attempt == self.config.retries:
                 return out
+        return out
+
+    def _servos(self) -> list[tuple[str, int, ControlTable]]:
+        """(name, id, table) of every configured servo, joints first."""
+        out = [(j.name or f"joint{k + 1}", j.dxl_id, j.table) for k, j in enumerate(self._joints)]
+        g = self.config.gripper
+        if g is not None:
+            out.append((g.name, g.dxl_id, g.table))
         return out
 
     def connect(self) -> None:
@@ -81,61 +115,121 @@ class DynamixelArmDriver(ArmDriver):
             try:
                 ok = port.openPort() and port.setBaudRate(cfg.baudrate)
             except Exception as exc:  # pyserial raises SerialException/OSError
-                raise DriverError(f"cannot open {cfg.port}: {exc}", code="port_unavailable") from exc
+                raise DriverError(f"cannot open {cfg.port}: {exc}", code="port_unavailable",
+                                  detail={"port": cfg.port}) from exc
             if not ok:
-                raise DriverError(f"cannot open {cfg.port} at {cfg.baudrate} baud", code="port_unavailable")
+                raise DriverError(f"cannot open {cfg.port} at {cfg.baudrate} baud", code="port_unavailable",
+                                  detail={"port": cfg.port})
             self._port = port
             try:
-                all_ids = [*self._ids] + ([cfg.gripper.dxl_id] if cfg.gripper else [])
-                for dxl_id in all_ids:
-                    _, res, err = self._retry(self._ph.ping, port, dxl_id)
-                    self._check(res, err & ~ALERT_BIT, "ping", dxl_id)
-                t = cfg.joint_table
-                self._gsw = GroupSyncWrite(port, self._ph, t.goal_position, 4)
-                self._gsr = GroupSyncRead(port, self._ph, t.present_position, 4)
-                self._gsr_err = GroupSyncRead(port, self._ph, t.hardware_error, 1)
-                for dxl_id in self._ids:
-                    self._gsr.addParam(dxl_id)
-                    self._gsr_err.addParam(dxl_id)
+                self._identify()
+                self._make_groups()
+                self._check_hardware_errors(include_gripper=True)
                 self._configure_servos()
+                self._hold_and_enable()
             except Exception:
                 port.closePort()
                 self._port = None
                 raise
+
+    def _identify(self) -> None:
+        """Ping every servo; the model number it reports must be the configured model's."""
+        for name, dxl_id, table in self._servos():
+            model_number, res, err = self._retry(self._ph.ping, self._port, dxl_id)
+            self._check(res, err, "ping", dxl_id)
+            fw, res, err = self._retry(self._ph.read1ByteTxRx, self._port, dxl_id, 6)
+            self._check(res, err, "firmware read", dxl_id)
+            self.servo_info[dxl_id] = {"name": name, "model": model_name(model_number),
+                                       "model_number": int(model_number), "firmware": int(fw)}
+            if model_number != table.model_number:
+                raise DriverError(
+                    f"servo {dxl_id} ({name}) is a {model_name(model_number)} (model number {model_number}), "
+                    f"the robot configuration expects a {table.name} (model number {table.model_number})",
+                    code="model_mismatch",
+                    detail={"id": dxl_id, "joint": name, "expected": table.name,
+                            "expected_model_number": table.model_number, "found": model_name(model_number),
+                            "found_model_number": int(model_number)},
+                )
+
+    def _make_groups(self) -> None:
+        layouts: dict[tuple[int, int], _Group] = {}
+        for k, j in enumerate(self._joints):
+            t = j.table
+            grp = layouts.get(t.layout)
+            if grp is None:
+                grp = layouts[t.layout] = _Group(
+                    t, [], GroupSyncWrite(self._port, self._ph, t.goal_position, 4),
+                    GroupSyncRead(self._port, self._ph, t.present_position, 4),
+                    GroupSyncRead(self._port, self._ph, t.hardware_error, 1))
+            grp.index.append(k)
+            grp.read.addParam(j.dxl_id)
+            grp.errors.addParam(j.dxl_id)
+        self._groups = list(layouts.values())
 
     def _write(self, dxl_id: int, addr: int, size: int, value: int, what: str) -> None:
         fn = {1: self._ph.write1ByteTxRx, 2: self._ph.write2ByteTxRx, 4: self._ph.write4ByteTxRx}[size]
         res, err = fn(self._port, dxl_id, addr, value & ((1 << (8 * size)) - 1))
         self._check(res, err, what, dxl_id)
 
+    def _read(self, dxl_id: int, addr: int, size: int, what: str) -> int:
+        fn = {1: self._ph.read1ByteTxRx, 2: self._ph.read2ByteTxRx, 4: self._ph.read4ByteTxRx}[size]
+        value, res, err = self._retry(fn, self._port, dxl_id, addr)
+        self._check(res, err, what, dxl_id)
+        return int(value)
+
     def _configure_servos(self) -> None:
-        """Operating mode (EEPROM, torque must be off) and the hardware speed/acceleration caps."""
-        cfg, t = self.config, self.config.joint_table
-        rpm = cfg.profile_velocity * 60.0 / (2 * math.pi)
-        rpm2 = cfg.profile_acceleration * 3600.0 / (2 * math.pi)
-        for dxl_id in self._ids:
-            if cfg.set_operating_mode:
-                torque, res, err = self._ph.read1ByteTxRx(self._port, dxl_id, t.torque_enable)
-                self._check(res, err, "read torque", dxl_id)
-                if not torque:
+        """EEPROM settings (only while torque is off) and the hardware speed/acceleration caps."""
+        cfg = self.config
+        entries = [(j.dxl_id, j.table, j) for j in self._joints]
+        if cfg.gripper is not None:
+            entries.append((cfg.gripper.dxl_id, cfg.gripper.table, cfg.gripper))
+        for dxl_id, t, s in entries:
+            torque_on = self._read(dxl_id, t.torque_enable, 1, "read torque")
+            if not torque_on:
+                if cfg.set_operating_mode:
                     self._write(dxl_id, t.operating_mode, 1, t.position_mode, "operating mode")
-            self._write(dxl_id, t.profile_velocity, 4, max(int(rpm / t.velocity_unit_rpm), 1), "profile velocity")
-            self._write(
-                dxl_id, t.profile_acceleration, 4, max(int(rpm2 / t.acceleration_unit_rpm2), 1), "profile acceleration"
-            )
-        g = cfg.gripper
-        if g is not None and cfg.set_operating_mode:
-            torque, res, err = self._ph.read1ByteTxRx(self._port, g.dxl_id, g.table.torque_enable)
-            self._check(res, err, "read torque", g.dxl_id)
-            if not torque:
-                self._write(g.dxl_id, g.table.operating_mode, 1, g.table.position_mode, "operating mode")
+                if getattr(s, "homing_offset", None) is not None:
+                    self._write(dxl_id, t.homing_offset, 4, s.homing_offset, "homing offset")
+                if s.return_delay_time is not None:
+                    self._write(dxl_id, t.return_delay_time, 1, s.return_delay_time, "return delay time")
+            is_joint = s is not cfg.gripper
+            vel = s.profile_velocity if s.profile_velocity is not None else (
+                t.raw_velocity(cfg.profile_velocity) if is_joint else None)
+            acc = s.profile_acceleration if s.profile_acceleration is not None else (
+                t.raw_acceleration(cfg.profile_acceleration) if is_joint else None)
+            if acc is not None:
+                self._write(dxl_id, t.profile_acceleration, 4, acc, "profile acceleration")
+            if vel is not None:
+                self._write(dxl_id, t.profile_velocity, 4, vel, "profile velocity")
+
+    def _sync_goals(self, q: np.ndarray) -> None:
+        for grp in self._groups:
+            grp.write.clearParam()
+            for k in grp.index:
+                j = self._joints[k]
+                grp.write.addParam(j.dxl_id, _u32_bytes(j.to_ticks(float(q[k]))))
+            res = grp.write.txPacket()
+            if res != COMM_SUCCESS:
+                raise DriverError(f"sync write failed: {self._ph.getTxRxResult(res)}", code="link_failed")
+
+    def _hold_and_enable(self) -> None:
+        """Goal = present on every servo, then torque on: the arm holds where it is, no jump."""
+        present = self._sync_read_positions()
+        self._sync_goals(present)
+        self._last_goal = present.copy()
+        g = self.config.gripper
+        if g is not None:
+            ticks = _signed32(self._read(g.dxl_id, g.table.present_position, 4, "gripper position read"))
+            self._write(g.dxl_id, g.table.goal_position, 4, ticks, "gripper goal position")
+        for _, dxl_id, table in self._servos():
+            self._write(dxl_id, table.torque_enable, 1, 1, "torque enable")
 
     def close(self) -> None:
         with self._lock:
             if self._port is None:
                 return
             try:
-                if self.config.torque_off_on_close:
+                if self.config.shutdown == "relax":
                     self.torque(False)
             finally:
                 self._port.closePort()
@@ -148,52 +242,68 @@ class DynamixelArmDriver(ArmDriver):
 
     # ------------------------------------------------------------------ joints
     def _sync_read_positions(self) -> np.ndarray:
-        t = self.config.joint_table
-        res = None
-        for _ in range(self.config.retries + 1):
-            res = self._gsr.txRxPacket()
-            if res == COMM_SUCCESS:
-                break
-        missing = [i for i in self._ids if not self._gsr.isAvailable(i, t.present_position, 4)]
-        if res != COMM_SUCCESS or missing:
-            # the sync read gives up at the first silent servo: ping them one by one to name it
-            missing = [i for i in self._ids if self._ph.ping(self._port, i)[1] != COMM_SUCCESS] or missing
-            raise DriverError(
-                f"servo(s) {missing or self._ids} did not answer the position read: {self._ph.getTxRxResult(res)}",
-                code="servo_silent",
-                detail={"ids": missing},
-            )
-        return np.array(
-            [j.to_rad(_signed32(self._gsr.getData(j.dxl_id, t.present_position, 4))) for j in self.config.joints]
-        )
+        q = np.zeros(len(self._joints))
+        for grp in self._groups:
+            addr = grp.table.present_position
+            res = None
+            for _ in range(self.config.retries + 1):
+                res = grp.read.txRxPacket()
+                if res == COMM_SUCCESS:
+                    break
+            ids = [self._joints[k].dxl_id for k in grp.index]
+            missing = [i for i in ids if not grp.read.isAvailable(i, addr, 4)]
+            if res != COMM_SUCCESS or missing:
+                # the sync read gives up at the first silent servo: ping them one by one to name it
+                missing = [i for i in ids if self._ph.ping(self._port, i)[1] != COMM_SUCCESS] or missing
+                raise DriverError(
+                    f"servo(s) {missing or ids} did not answer the position read: {self._ph.getTxRxResult(res)}",
+                    code="servo_silent",
+                    detail={"ids": missing},
+                )
+            for k in grp.index:
+                j = self._joints[k]
+                q[k] = j.to_rad(_signed32(grp.read.getData(j.dxl_id, addr, 4)))
+        return q
 
-    def _check_hardware_errors(self) -> None:
-        t = self.config.joint_table
-        res = self._gsr_err.txRxPacket()
-        if res != COMM_SUCCESS:
-            raise DriverError(
-                "hardware error read failed", code="servo_silent", detail={"result": self._ph.getTxRxResult(res)}
-            )
-        bad = {i: self._gsr_err.getData(i, t.hardware_error, 1) for i in self._ids}
+    def _check_hardware_errors(self, include_gripper: bool = False) -> None:
+        """Hardware Error Status of every joint (and the gripper): any bit set is a typed ``servo_error``."""
+        bad: dict[int, int] = {}
+        for grp in self._groups:
+            res = grp.errors.txRxPacket()
+            if res != COMM_SUCCESS:
+                raise DriverError("hardware error read failed", code="servo_silent",
+                                  detail={"result": self._ph.getTxRxResult(res)})
+            for k in grp.index:
+                i = self._joints[k].dxl_id
+                bad[i] = grp.errors.getData(i, grp.table.hardware_error, 1)
+        g = self.config.gripper
+        if include_gripper and g is not None:
+            bad[g.dxl_id] = self._read(g.dxl_id, g.table.hardware_error, 1, "hardware error status")
         bad = {i: v for i, v in bad.items() if v}
         if bad:
-            raise DriverError(f"servo hardware error {bad}", code="servo_error", detail={"hardware_error": bad})
+            named = {i: describe_hardware_error(v) for i, v in bad.items()}
+            text = "; ".join(f"ID {i}: {', '.join(v)}" for i, v in named.items())
+            raise DriverError(f"servo hardware error: {text} (reboot the servo after fixing the cause)",
+                              code="servo_error", detail={"hardware_error": bad, "faults": named})
 
     def read_joints(self) -> np.ndarray:
         with self._lock:
             self._require()
             return self._sync_read_positions()
 
+    def _check_limits(self, q: np.ndarray) -> None:
+        for j, v in zip(self._joints, q, strict=True):
+            if j.limits is not None and not j.limits[0] <= v <= j.limits[1]:
+                raise DriverError(f"{j.name or j.dxl_id} set-point {v:.3f} rad is outside its configured limits "
+                                  f"{list(j.limits)}", code="joint_limit",
+                                  detail={"joint": j.name, "id": j.dxl_id, "q": float(v), "limits": list(j.limits)})
+
     def write_setpoint(self, q: np.ndarray) -> None:
         with self._lock:
             self._require()
             q = np.asarray(q, dtype=np.float64)
-            self._gsw.clearParam()
-            for j, v in zip(self.config.joints, q, strict=True):
-                self._gsw.addParam(j.dxl_id, _u32_bytes(j.to_ticks(float(v))))
-            res = self._gsw.txPacket()
-            if res != COMM_SUCCESS:
-                raise DriverError(f"sync write failed: {self._ph.getTxRxResult(res)}", code="link_failed")
+            self._check_limits(q)
+            self._sync_goals(q)
             self._last_goal = q.copy()
             present = self._sync_read_positions()
             self._cycle += 1
@@ -201,37 +311,51 @@ class DynamixelArmDriver(ArmDriver):
                 self._check_hardware_errors()
             lag = np.abs(present - q)
             if np.max(lag) > self.config.max_tracking_error:
-                i = int(np.argmax(lag))
-                raise DriverError(
-                    f"joint {i + 1} lags its set-point by {lag[i]:.3f} rad",
-                    code="tracking_error",
-                    detail={"joint": i + 1, "id": self._ids[i], "lag_rad": float(lag[i])},
-                )
+                raise self._tracking_error(int(np.argmax(lag)), float(lag[int(np.argmax(lag))]), "lags its set-point")
+
+    def _tracking_error(self, k: int, err: float, what: str) -> DriverError:
+        j = self._joints[k]
+        name = j.name or f"joint{k + 1}"
+        return DriverError(f"{name} (ID {j.dxl_id}) {what} by {err:.3f} rad", code="tracking_error",
+                           detail={"joint": name, "index": k + 1, "id": j.dxl_id, "error_rad": err})
+
+    def settle(self, q: np.ndarray | None = None) -> np.ndarray:
+        """Wait until every joint is within ``settle_tolerance`` of ``q`` (default: the last set-point).
+
+        A servo in hardware error is named as such; one that simply does not get there (stalled, blocked,
+        torque off) gives ``tracking_error`` with the joint and its error."""
+        cfg = self.config
+        with self._lock:
+            self._require()
+            target = np.asarray(q if q is not None else self._last_goal, dtype=np.float64)
+            deadline = time.monotonic() + cfg.settle_timeout_s
+            while True:
+                present = self._sync_read_positions()
+                err = np.abs(present - target)
+                if np.max(err) <= cfg.settle_tolerance:
+                    return present
+                if time.monotonic() > deadline:
+                    self._check_hardware_errors()
+                    k = int(np.argmax(err))
+                    raise self._tracking_error(k, float(err[k]), "did not settle at its target")
+                time.sleep(0.005)
 
     def torque(self, on: bool) -> None:
         with self._lock:
             self._require()
-            ids = [(i, self.config.joint_table) for i in self._ids]
-            if self.config.gripper:
-                ids.append((self.config.gripper.dxl_id, self.config.gripper.table))
             if on:  # hold where the arm is: goal = present before torque comes on
-                present = self._sync_read_positions()
-                self._gsw.clearParam()
-                for j, v in zip(self.config.joints, present, strict=True):
-                    self._gsw.addParam(j.dxl_id, _u32_bytes(j.to_ticks(float(v))))
-                self._gsw.txPacket()
-            for dxl_id, table in ids:
-                self._write(dxl_id, table.torque_enable, 1, 1 if on else 0, "torque enable")
+                self._hold_and_enable()
+                return
+            for _, dxl_id, table in self._servos():
+                self._write(dxl_id, table.torque_enable, 1, 0, "torque enable")
 
     def stop(self) -> None:
-        """Hold: write the present positions as goals."""
+        """Hold: write the present positions as goals (torque stays on)."""
         with self._lock:
             self._require()
             present = self._sync_read_positions()
-            self._gsw.clearParam()
-            for j, v in zip(self.config.joints, present, strict=True):
-                self._gsw.addParam(j.dxl_id, _u32_bytes(j.to_ticks(float(v))))
-            self._gsw.txPacket()
+            self._sync_goals(present)
+            self._last_goal = present
 
     # ------------------------------------------------------------------ gripper
     def set_gripper(self, opening_m: float, force: float) -> None:
@@ -249,6 +373,26 @@ class DynamixelArmDriver(ArmDriver):
             raise DriverError("no gripper configured", code="no_gripper")
         with self._lock:
             self._require()
-            ticks, res, err = self._retry(self._ph.read4ByteTxRx, self._port, g.dxl_id, g.table.present_position)
-            self._check(res, err, "gripper position read", g.dxl_id)
-            return g.to_opening(_signed32(ticks))
+            return g.to_opening(_signed32(self._read(g.dxl_id, g.table.present_position, 4, "gripper position read")))
+
+
+def scan_bus(port: str, baudrate: int = 1_000_000) -> list[dict]:
+    """Every servo answering a broadcast ping on ``port``: ID, model (name and number), firmware.
+
+    For ``objscan devices``: no configuration needed, nothing written."""
+    ph = PacketHandler(2.0)
+    handler = PortHandler(port)
+    try:
+        ok = handler.openPort() and handler.setBaudRate(baudrate)
+    except Exception as exc:  # pyserial raises SerialException/OSError
+        raise DriverError(f"cannot open {port}: {exc}", code="port_unavailable", detail={"port": port}) from exc
+    if not ok:
+        raise DriverError(f"cannot open {port} at {baudrate} baud", code="port_unavailable", detail={"port": port})
+    try:
+        found, res = ph.broadcastPing(handler)
+        if res != COMM_SUCCESS and not found:
+            return []
+        return [{"id": int(i), "model": model_name(int(m)), "model_number": int(m), "firmware": int(fw)}
+                for i, (m, fw) in sorted(found.items())]
+    finally:
+        handler.closePort()

@@ -2,13 +2,17 @@
 
 ``DynamixelBusEmulator`` opens a pty pair; the driver (or the DYNAMIXEL Wizard, or any SDK program)
 opens ``emulator.port`` like a U2D2 at ``/dev/ttyUSB0``. A thread parses instruction packets (CRC
-checked, byte stuffing undone) and answers like XM-series servos (and an RH-P12-RN(A) gripper): PING,
-READ, WRITE, SYNC READ, SYNC WRITE, REBOOT. Each servo keeps its control table in memory; with torque on,
-Present Position follows Goal Position, at Profile Velocity when one is set (or at once).
+checked, byte stuffing undone) and answers like DYNAMIXEL-P (PH54/PH42/PM54/PM42), X-series servos and an
+RH-P12-RN(A) gripper, each with its own control table (``control_table.py``): PING (model number and
+firmware), READ, WRITE, SYNC READ, SYNC WRITE, REBOOT. Each servo keeps its table in memory; with torque
+on, Present Position follows Goal Position at Profile Velocity (or at once when none is set); Homing
+Offset shifts Present Position as on the real servo. The default bus is the PAPRAS one built from the
+robot configuration (``servos_for``), standing at the configuration's home posture.
 
 Faults can be injected per servo (``silent``: never answers; ``alert``: hardware error bits, reported in
-every status packet and in Hardware Error Status) so tests can check that the driver stops a motion with
-a typed error. Every instruction packet received is kept in ``log`` for tests.
+every status packet and in Hardware Error Status; ``stalled``: answers but never moves; ``block_at``: the
+position stops there, as fingers closing on an object) so tests can check that the driver stops a motion
+with a typed error. Every instruction packet received is kept in ``log`` for tests.
 
 Run it for manual work: ``python -m services.arm.drivers.dynamixel emulate``.
 """
@@ -22,9 +26,15 @@ import struct
 import threading
 import time
 import tty
+from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from services.arm.drivers.dynamixel import protocol as p
+
+if TYPE_CHECKING:
+    from services.arm.drivers.dynamixel.config import DynamixelConfig
 from services.arm.drivers.dynamixel.control_table import RH_P12_RN_A, X_SERIES, ControlTable
 
 
@@ -34,18 +44,29 @@ class EmulatedServo:
 
     dxl_id: int
     table: ControlTable = X_SERIES
-    present_position: int = 2048
-    max_position: int = 4095
-    min_position: int = 0
+    present_position: int | None = None  # default: the table's 0 rad
+    max_position: int | None = None  # default: the table's full range
+    min_position: int | None = None
     firmware: int = 46
+    homing_offset: int = 0
     silent: bool = False
     alert: int = 0  # Hardware Error Status bits (0 = healthy)
+    stalled: bool = False  # answers, takes goals, never moves (a blocked or broken joint)
+    block_at: int | None = None  # the position cannot pass this value (fingers closed on an object)
     max_ticks_per_s: float = 0.0  # mechanical speed cap (0 = none), e.g. the gripper's 75 mm/s
     memory: bytearray = field(default_factory=lambda: bytearray(1024))
 
     def __post_init__(self) -> None:
         t = self.table
+        half = t.ticks_per_rev // 2
+        if self.present_position is None:
+            self.present_position = t.center_tick
+        if self.max_position is None:
+            self.max_position = t.center_tick + half - 1 if t.center_tick else half
+        if self.min_position is None:
+            self.min_position = 0 if t.center_tick else -half
         struct.pack_into("<H", self.memory, 0, t.model_number)
+        struct.pack_into("<i", self.memory, t.homing_offset, self.homing_offset)
         self.memory[6] = self.firmware
         self.memory[7] = self.dxl_id
         self.memory[t.operating_mode] = t.position_mode
@@ -83,6 +104,9 @@ class EmulatedServo:
             return p.ERR_DATA_RANGE
         if addr < t.eeprom_end and self.torque_on:
             return p.ERR_ACCESS  # EEPROM is locked while torque is on
+        if addr <= t.homing_offset < addr + len(data) and len(data) >= t.homing_offset - addr + 4:
+            new = struct.unpack_from("<i", data, t.homing_offset - addr)[0]
+            self._position += new - self._i32(t.homing_offset)  # Present Position = actual + Homing Offset
         if addr <= t.goal_position < addr + len(data) and len(data) >= t.goal_position - addr + 4:
             goal = struct.unpack_from("<i", data, t.goal_position - addr)[0]
             lo, hi = self._i32(t.min_position_limit), self._i32(t.max_position_limit)
@@ -96,13 +120,15 @@ class EmulatedServo:
 
     def step(self, dt: float) -> None:
         """Move Present Position towards Goal Position (torque on, no alert)."""
-        if not self.torque_on or self.alert:
+        if not self.torque_on or self.alert or self.stalled:
             return
         goal = float(self.goal_position)
+        if self.block_at is not None and min(self._position, goal) <= self.block_at <= max(self._position, goal):
+            goal = float(self.block_at)
         rate = float("inf")
         vel_raw = struct.unpack_from("<I", self.memory, self.table.profile_velocity)[0]
-        if vel_raw and self.table is X_SERIES:
-            rate = vel_raw * self.table.velocity_unit_rpm / 60.0 * 4096.0  # ticks/s
+        if vel_raw and self.table is not RH_P12_RN_A:
+            rate = vel_raw * self.table.velocity_unit_rpm / 60.0 * self.table.ticks_per_rev  # ticks/s
         if self.max_ticks_per_s:
             rate = min(rate, self.max_ticks_per_s)
         d = goal - self._position
@@ -113,12 +139,31 @@ def xm_arm_servos(ids: tuple[int, ...] = (1, 2, 3, 4, 5, 6)) -> list[EmulatedSer
     return [EmulatedServo(i, X_SERIES) for i in ids]
 
 
-def rh_p12_rn_gripper(dxl_id: int = 7) -> EmulatedServo:
+def servos_for(config: DynamixelConfig | None = None, q: Sequence[float] | None = None,
+               opening: float | None = None) -> list[EmulatedServo]:
+    """The bus a robot configuration describes (default: PAPRAS), standing at ``q`` (default: its home).
+
+    Each joint servo is of the configured model with the configured homing offset already in its EEPROM
+    (as on an arm set up once), so the driver reads ``q`` back exactly."""
+    from services.arm.drivers.dynamixel.config import DynamixelConfig
+
+    config = config or DynamixelConfig()
+    q = config.home if q is None else q
+    out = [EmulatedServo(j.dxl_id, j.table, present_position=j.to_ticks(float(v)), homing_offset=j.homing_offset or 0,
+                         firmware=45 if j.table.center_tick == 0 else 46)
+           for j, v in zip(config.joints, q, strict=True)]
+    if config.gripper is not None:
+        ticks = config.gripper.to_ticks(opening) if opening is not None else 0
+        out.append(rh_p12_rn_gripper(config.gripper.dxl_id, ticks))
+    return out
+
+
+def rh_p12_rn_gripper(dxl_id: int = 7, present_position: int = 0) -> EmulatedServo:
     # closes its 106 mm stroke (740 pulses) at about 75 mm/s, as the e-manual states
     return EmulatedServo(
         dxl_id,
         RH_P12_RN_A,
-        present_position=0,
+        present_position=present_position,
         max_position=1150,
         min_position=0,
         firmware=12,
@@ -130,10 +175,10 @@ class DynamixelBusEmulator:
     """Servos behind a pty; ``port`` is the device path to open."""
 
     def __init__(self, servos: list[EmulatedServo] | None = None, tick_s: float = 0.002):
-        servos = servos if servos is not None else [*xm_arm_servos(), rh_p12_rn_gripper()]
+        servos = servos if servos is not None else servos_for()
         self.servos = {s.dxl_id: s for s in servos}
         self.tick_s = tick_s
-        self.log: list[p.Packet] = []
+        self.log: deque[p.Packet] = deque(maxlen=200_000)  # bounded: a long HIL run streams at 100 Hz
         self.crc_errors = 0
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -164,6 +209,20 @@ class DynamixelBusEmulator:
     def packets(self, instruction: int | None = None) -> list[p.Packet]:
         with self._lock:
             return [k for k in self.log if instruction is None or k.instruction == instruction]
+
+    def snapshot(self) -> dict[int, tuple[int, int]]:
+        """(present, goal) position of every servo, read consistently (the bus's physical state)."""
+        with self._lock:
+            out = {}
+            for i, s in self.servos.items():
+                s._sync_present()
+                out[i] = (s._i32(s.table.present_position), s.goal_position)
+            return out
+
+    def set_block(self, dxl_id: int, position: int | None) -> None:
+        """Make ``dxl_id`` stop at ``position`` (None: free), e.g. fingers meeting an object."""
+        with self._lock:
+            self.servos[dxl_id].block_at = position
 
     def clear_log(self) -> None:
         with self._lock:
