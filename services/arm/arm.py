@@ -14,7 +14,7 @@ import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pinocchio as pin
@@ -55,6 +55,9 @@ class ArmController:
 
     def __init__(self, driver: ArmDriver, config: ArmConfig | None = None, kinematics: Kinematics | None = None):
         self.config = config or ArmConfig()
+        caps = driver.motion_caps()
+        if caps is not None:  # plan with margin under the servos' own profile limits
+            self.config = replace(self.config, limits=self.config.limits.capped(0.95 * caps[0], 0.95 * caps[1]))
         self.driver = driver
         self.kinematics = kinematics or Kinematics(self.config.kinematics)
         self.collision = CollisionWorld(self.kinematics, self.config.collision)
@@ -197,6 +200,8 @@ class ArmController:
                 "motion halted by emergency stop",
                 detail={"after_s": round(result.elapsed_s, 3), "setpoints_sent": result.setpoints_sent},
             )
+        # the last set-point is not the arm's position: every backend confirms the arm got there
+        self._q = self.driver.settle(np.asarray(trajectory.q_end, dtype=np.float64))
         info.update(setpoints_sent=result.setpoints_sent, elapsed_s=result.elapsed_s)
         return info
 
@@ -217,6 +222,16 @@ class ArmController:
         """Jerk-limited joint motion to ``q`` (6 rad). Returns timing and check figures."""
         with self._exclusive():
             return self._run(self.plan_joints(q, speed_scale), False, dry_run)
+
+    def home(self, speed_scale: float = 1.0, dry_run: bool = False) -> dict:
+        """Go to the backend's home posture (``driver.home_q``); a read-only backend (replay) rewinds instead."""
+        if self.driver.read_only:
+            with self._exclusive():
+                self.driver.home()
+                self._q = self.driver.read_joints()
+            q = self._q.copy()
+            return {"duration_s": 0.0, "setpoints_sent": 0, "q_end": q, "frames_end": self.kinematics.fk_frames(q)}
+        return self.move_joints(self.driver.home_q, speed_scale, dry_run)
 
     def move_pose(
         self,

@@ -48,6 +48,12 @@ class MotionLimits:
                 )
             setattr(self, name, v)
 
+    def capped(self, max_velocity: np.ndarray | None, max_acceleration: np.ndarray | None) -> MotionLimits:
+        """These limits, lowered per joint to what the hardware allows (e.g. servo profile caps)."""
+        v = self.max_velocity if max_velocity is None else np.minimum(self.max_velocity, max_velocity)
+        a = self.max_acceleration if max_acceleration is None else np.minimum(self.max_acceleration, max_acceleration)
+        return MotionLimits(v, a, self.max_jerk.copy())
+
     def scaled(self, speed_scale: float) -> MotionLimits:
         """Limits of the same motion slowed down in time by 1/speed_scale (v*s, a*s^2, j*s^3)."""
         s = float(speed_scale)

@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import asyncio
+import os
 
 import numpy as np
 
@@ -25,6 +26,7 @@ from common.errors import InvalidRequest
 from common.messages import JointState, Ok, Request
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
 from services.arm.arm import ArmConfig, ArmController
+from services.arm.drivers.registry import BACKENDS, DriverContext, driver_entry, make_driver
 from services.arm.kinematics import Kinematics
 
 STATE_RATE_HZ = 50.0
@@ -36,9 +38,10 @@ class ArmService(Service):
     async def setup(self) -> None:
         opts = self.settings.options
         self.backend = opts.get("backend", "sim")
-        config = ArmConfig(realtime=self.backend != "sim")
+        entry = driver_entry(self.backend)
+        config = ArmConfig(realtime=entry.realtime)
         kin = Kinematics(config.kinematics)
-        driver = self._make_driver(kin, opts)
+        driver, _ = make_driver(self.backend, DriverContext(self.session, self.robot, kin, opts))
         self.arm = ArmController(driver, config, kinematics=kin)
         await self.run_cpu(self.arm.connect)
         r = self.robot
@@ -49,25 +52,6 @@ class ArmService(Service):
         self.queryable(keys.arm(r, "state"), self.state)
         self.state_pub = self.publisher(keys.arm(r, "state"), block=False)
         self.spawn(self._stream_state())
-
-    def _make_driver(self, kin: Kinematics, opts: dict):  # noqa: ANN202
-        if self.backend == "sim":
-            from services.arm.twin_link import TwinLinkedDriver
-
-            return TwinLinkedDriver(self.session, self.robot, kin)
-        if self.backend == "dynamixel":
-            from services.arm.drivers.dynamixel.config import DynamixelConfig
-            from services.arm.drivers.dynamixel.driver import DynamixelArmDriver
-
-            return DynamixelArmDriver(DynamixelConfig(port=opts.get("port", "/dev/ttyUSB0"),
-                                                      baudrate=int(opts.get("baud", 1_000_000))))
-        if self.backend == "replay":
-            from pathlib import Path
-
-            from services.arm.drivers.replay.driver import ReplayArmDriver
-
-            return ReplayArmDriver.from_session(Path(opts["session"]))
-        raise InvalidRequest(f"unknown arm backend {self.backend!r}")
 
     def _joint_state(self) -> JointState:
         s = self.arm.state()
@@ -97,8 +81,7 @@ class ArmService(Service):
         if msg.kind == "joints":
             info = await self.run_cpu(a.move_joints, msg.q, msg.speed_scale, msg.dry_run)
         elif msg.kind == "home":
-            q = np.asarray(a.driver.config.initial_q if hasattr(a.driver, "config") else np.zeros(6))
-            info = await self.run_cpu(a.move_joints, q, msg.speed_scale, msg.dry_run)
+            info = await self.run_cpu(a.home, msg.speed_scale, msg.dry_run)
         elif msg.kind == "pose":
             info = await self.run_cpu(a.move_pose, msg.target, msg.speed_scale, msg.free_roll, msg.frame,
                                       msg.allow_object_contact, msg.dry_run, msg.q)
@@ -154,11 +137,17 @@ class ArmService(Service):
 
 def main() -> None:
     p = service_arg_parser("objscan arm service (PAPRAS: pinocchio IK, Ruckig motion, collision checks)")
-    p.add_argument("--backend", choices=["sim", "dynamixel", "replay", "real"], default="sim")
-    p.add_argument("--port", default="/dev/ttyUSB0", help="dynamixel: serial port of the U2D2")
-    p.add_argument("--baud", type=int, default=1_000_000, help="dynamixel: bus baud rate")
+    p.add_argument("--backend", choices=[*BACKENDS, "real"], default="sim", help="real = dynamixel")
+    p.add_argument("--robot-config", default=os.environ.get("OBJSCAN_ROBOT_CONFIG"),
+                   help="dynamixel: robot configuration YAML (default: env OBJSCAN_ROBOT_CONFIG, else the PAPRAS "
+                        "one shipped in services/arm/robot/papras_dynamixel.yaml)")
+    p.add_argument("--port", help="dynamixel: serial port of the U2D2 (default: the robot configuration's)")
+    p.add_argument("--baud", type=int, help="dynamixel: bus baud rate (default: the robot configuration's)")
+    p.add_argument("--emulate-bus", action="store_true",
+                   help="dynamixel: an emulated bus of the configured servos whose positions drive the twin")
     p.add_argument("--session", help="replay: session folder whose recorded joints to report")
     args = p.parse_args()
     backend = "dynamixel" if args.backend == "real" else args.backend
-    run_service(lambda: ArmService(settings_from_args(args, backend=backend, port=args.port, baud=args.baud,
-                                                      session=args.session)))
+    run_service(lambda: ArmService(settings_from_args(
+        args, backend=backend, port=args.port, baud=args.baud, session=args.session,
+        robot_config=args.robot_config, emulate_bus=args.emulate_bus)))

@@ -24,7 +24,7 @@ from common.zenoh_config import open_session
 from services.arm.drivers.sim.config import SimDriverConfig
 from services.arm.errors import DriverError
 from services.arm.kinematics import Kinematics
-from services.arm.twin_link import TwinLinkedDriver
+from services.arm.drivers.sim.twin_link import TwinLinkedDriver
 
 pytestmark = pytest.mark.timeout(120)
 ROBOT = "twinlink"

@@ -20,6 +20,8 @@ from services.arm.errors import BadCommand, DriverError
 from services.arm.motion import JointTrajectory
 
 JOINT_NAMES = tuple(f"robot1/joint{i}" for i in range(1, 7))
+# a camera-up posture clear of the table: where the twin starts, and every backend's home unless configured
+HOME_Q = (0.0, -0.3, -0.9, 0.0, 1.2, 0.0)
 
 
 class ArmDriver(ABC):
@@ -27,6 +29,27 @@ class ArmDriver(ABC):
 
     name = "driver"
     joint_names = JOINT_NAMES
+    read_only = False  # True: reports recorded states, refuses motion (replay)
+
+    @property
+    def home_q(self) -> np.ndarray:
+        """Joint positions of the home posture (rad); backends with a configuration override it."""
+        return np.asarray(HOME_Q, dtype=np.float64)
+
+    def motion_caps(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(velocity rad/s, acceleration rad/s^2) per joint the hardware itself enforces, or None. The
+        controller plans under them, so a servo's own profile never makes the arm lag its set-points."""
+        return None
+
+    def home(self) -> None:
+        """Read-only backends only: go back to their first state (a moving arm goes to ``home_q`` instead)."""
+        raise BadCommand(f"the {self.name} driver moves to home_q through the controller", code="bad_value")
+
+    def settle(self, q: np.ndarray) -> np.ndarray:
+        """After a motion: confirm the arm reached ``q`` and return where it is. Hardware backends wait for
+        the servos and raise ``DriverError`` (``tracking_error``) when a joint stays off; a twin that follows
+        set-points exactly has nothing to wait for."""
+        return self.read_joints()
 
     @abstractmethod
     def connect(self) -> None:

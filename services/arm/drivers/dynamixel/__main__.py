@@ -11,7 +11,7 @@ from services.arm.drivers.dynamixel.emulator import DynamixelBusEmulator
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m services.arm.drivers.dynamixel")
     sub = ap.add_subparsers(dest="cmd", required=True)
-    sub.add_parser("emulate", help="emulate the PAPRAS bus: 6 DYNAMIXEL-P servos (IDs 1-6) and an RH-P12-RN(A) (ID 111)")
+    sub.add_parser("emulate", help="emulate the PAPRAS bus: 6 DYNAMIXEL-P servos (IDs 1-6), an RH-P12-RN(A) (ID 111)")
     args = ap.parse_args(argv)
     if args.cmd == "emulate":
         with DynamixelBusEmulator() as emu:

@@ -203,11 +203,3 @@ class DynamixelConfig:
             v = getattr(self, k)
             if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise _fail(k, "must be a positive number", value=repr(v))
-
-    def joint_velocity_caps(self) -> list[float]:
-        """The speed each joint servo will allow (rad/s): what a planner must stay under."""
-        out = []
-        for j in self.joints:
-            raw = j.profile_velocity
-            out.append(j.table.rad_per_s(raw) if raw else self.profile_velocity)
-        return out

@@ -76,6 +76,15 @@ class DynamixelArmDriver(ArmDriver):
     def home_q(self) -> np.ndarray:
         return np.asarray(self.config.home, dtype=np.float64)
 
+    def motion_caps(self) -> tuple[np.ndarray, np.ndarray]:
+        """The profile velocity/acceleration every joint servo is given at connect, in rad/s and rad/s^2."""
+        cfg = self.config
+        vel = [j.table.rad_per_s(j.profile_velocity) if j.profile_velocity else cfg.profile_velocity
+               for j in self._joints]
+        acc = [j.table.rad_per_s2(j.profile_acceleration) if j.profile_acceleration else cfg.profile_acceleration
+               for j in self._joints]
+        return np.asarray(vel), np.asarray(acc)
+
     # ------------------------------------------------------------------ link
     def _check(self, result: int, error: int, what: str, dxl_id: int) -> None:
         if result != COMM_SUCCESS:

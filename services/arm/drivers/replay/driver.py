@@ -69,6 +69,16 @@ class ReplayArmDriver(ArmDriver):
             return True
         return False
 
+    read_only = True
+
+    @property
+    def home_q(self) -> np.ndarray:
+        return self.states[0].copy()
+
+    def home(self) -> None:
+        """Home on a replay: back to the first recorded state."""
+        self.seek(0)
+
     def connect(self) -> None:
         return None
 

@@ -36,6 +36,10 @@ class SimArmDriver(ArmDriver):
         self._connected = False
         self._lock = threading.Lock()
 
+    @property
+    def home_q(self) -> np.ndarray:
+        return np.asarray(self.config.initial_q, dtype=np.float64)
+
     def connect(self) -> None:
         self._connected = True
         self._torque = True
