@@ -46,6 +46,13 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--resume", metavar="SESSION_DIR", help="continue an interrupted session")
     p.add_argument("--backend", choices=["sim", "real"], default="sim",
                    help="hardware backends when services must be started (default: %(default)s)")
+    p.add_argument("--arm-backend", choices=["sim", "dynamixel"],
+                   help="arm backend when the arm must be started (default: as --backend); dynamixel with "
+                        "--emulate-bus runs the real DYNAMIXEL driver against an emulated bus driving the twin")
+    p.add_argument("--emulate-bus", action="store_true",
+                   help="dynamixel arm: emulate the configured servos (PAPRAS: DYNAMIXEL-P) on a pty, their "
+                        "positions driving the twin (hardware in the loop, no hardware)")
+    p.add_argument("--robot-config", help="dynamixel arm: robot configuration YAML (default: PAPRAS)")
     p.add_argument("--port", type=int, default=DEFAULT_ROUTER_PORT, help="router port of the cell")
     p.add_argument("--force-first-slip", action="store_true", help="sim: make the first grasp slip")
     p.add_argument("--no-record", action="store_true", help="do not record the session to session.mcap")
@@ -83,12 +90,26 @@ def ensure_cell(port: int, backend: str, log_dir: Path, services: list[str] | No
     return group
 
 
+def arm_args(args) -> dict[str, list[str]]:  # noqa: ANN001
+    """The arm service's own flags from ``--arm-backend``/``--emulate-bus``/``--robot-config``."""
+    out: list[str] = []
+    if args.emulate_bus and (args.arm_backend or "dynamixel") != "dynamixel":
+        raise SystemExit("--emulate-bus needs --arm-backend dynamixel")
+    if args.arm_backend or args.emulate_bus:
+        out += ["--backend", args.arm_backend or "dynamixel"]
+    if args.emulate_bus:
+        out.append("--emulate-bus")
+    if args.robot_config:
+        out += ["--robot-config", str(Path(args.robot_config).resolve())]
+    return {"arm": out} if out else {}
+
+
 def run(args) -> int:  # noqa: ANN001
     t0 = time.time()
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # unwind: the services this started are stopped
     session_dir = Path(args.resume or args.out or f"sessions/{Path(args.object).stem}-{time.strftime('%Y%m%d-%H%M%S')}")
     session_dir = session_dir.resolve()
-    with ensure_cell(args.port, args.backend, session_dir / "logs") as group:
+    with ensure_cell(args.port, args.backend, session_dir / "logs", extra_args=arm_args(args)) as group:
         session = group.session
         updates: queue.Queue[dict[str, Any]] = queue.Queue()
 

@@ -22,9 +22,9 @@ from common.codec import decode
 from common.messages import Error, JointState, Ok
 from common.zenoh_config import open_session
 from services.arm.drivers.sim.config import SimDriverConfig
+from services.arm.drivers.sim.twin_link import TwinLinkedDriver
 from services.arm.errors import DriverError
 from services.arm.kinematics import Kinematics
-from services.arm.drivers.sim.twin_link import TwinLinkedDriver
 
 pytestmark = pytest.mark.timeout(120)
 ROBOT = "twinlink"

@@ -113,6 +113,9 @@ def execute(
 ) -> ExecutionResult:
     """Stream ``trajectory`` to ``driver`` at ``rate_hz``; real time, or as fast as the driver takes them.
 
+    In real time, a stream that falls more than one period behind (the process was not scheduled) is
+    re-anchored rather than caught up: the motion takes longer, but consecutive set-points never advance
+    faster than the planned velocities, which a servo with a profile velocity cap could not follow.
     ``check(q, q_prev, dt)`` runs on each set-point before it is sent (the safety envelope's last line of
     defence). When ``stop_event`` is set the loop stops before the next set-point, calls
     ``driver.stop()`` and returns with ``stopped=True``. A driver error also calls ``driver.stop()``
@@ -123,7 +126,7 @@ def execute(
     stop_event = stop_event or threading.Event()
     dt = 1.0 / rate_hz
     n = max(int(np.ceil(trajectory.duration * rate_hz)), 1)
-    t0 = time.perf_counter()
+    t0 = t_start = time.perf_counter()
     q_prev: np.ndarray | None = None
     sent = 0
     try:
@@ -132,6 +135,8 @@ def execute(
                 delay = t0 + i * dt - time.perf_counter()
                 if delay > 0 and stop_event.wait(delay):
                     break
+                if delay < -dt:  # the stream stalled (a loaded machine): resume the trajectory from here at
+                    t0 -= delay  # its own pace; catching up would send set-points faster than the servos go
             if stop_event.is_set():
                 break
             q = trajectory.at(min(i * dt, trajectory.duration))[0]
@@ -152,4 +157,4 @@ def execute(
     if stopped:
         driver.stop()
     q_last = q_prev if q_prev is not None else trajectory.q_start
-    return ExecutionResult(not stopped, stopped, sent, time.perf_counter() - t0, np.asarray(q_last))
+    return ExecutionResult(not stopped, stopped, sent, time.perf_counter() - t_start, np.asarray(q_last))

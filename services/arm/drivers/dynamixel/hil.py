@@ -35,7 +35,7 @@ log = logging.getLogger("objscan.arm")
 class BusTwinBridge:
     """Mirror an emulated bus into the twin (``twin``: a connected-on-start sim driver, e.g. the twin link)."""
 
-    def __init__(self, config: DynamixelConfig, twin: ArmDriver, rate_hz: float = 100.0):
+    def __init__(self, config: DynamixelConfig, twin: ArmDriver, rate_hz: float = 30.0):
         self.config = config
         self.twin = twin
         self.period = 1.0 / rate_hz
@@ -116,8 +116,11 @@ class EmulatedBusDriver(DynamixelArmDriver):
 
     name = "dynamixel"
 
-    def __init__(self, config: DynamixelConfig, twin: ArmDriver, rate_hz: float = 100.0):
+    def __init__(self, config: DynamixelConfig, twin: ArmDriver, rate_hz: float = 30.0):
         super().__init__(config)
+        # the emulator shares this process (and its GIL) with the planner and the twin link: on a loaded
+        # machine a status packet can miss the SDK's ~34 ms timeout, which a real bus would not; retry more
+        self.config.retries = max(self.config.retries, 4)
         self.bridge = BusTwinBridge(self.config, twin, rate_hz)
 
     def connect(self) -> None:
