@@ -7,6 +7,7 @@ import threading
 import time
 from pathlib import Path
 
+from common.errors import ObjscanError
 from common.launcher import ServiceGroup
 from common.zenoh_config import DEFAULT_ROUTER_PORT
 from services.cli.cells import SERVICE_MODULES, cell_specs
@@ -18,10 +19,30 @@ def register(sub) -> None:  # noqa: ANN001
                                    "process. Ctrl-C (or SIGTERM) stops them all cleanly.")
     p.add_argument("--backend", choices=["sim", "real", "replay"], default="sim",
                    help="hardware backends for camera and arm (default: %(default)s)")
+    p.add_argument("--robot-config", help="robot configuration YAML for the dynamixel arm (default: PAPRAS, "
+                                          "services/arm/robot/papras_dynamixel.yaml); see docs/arm.md")
+    p.add_argument("--emulate-bus", action="store_true",
+                   help="sim cell with the real DYNAMIXEL driver on an emulated bus driving the twin")
     p.add_argument("--port", type=int, default=DEFAULT_ROUTER_PORT, help="router port (default: %(default)s)")
     p.add_argument("--only", help=f"comma-separated subset of: {', '.join(SERVICE_MODULES)}")
     p.add_argument("--log-dir", default="logs", help="one log file per process (default: %(default)s)")
     p.set_defaults(func=run)
+
+
+def arm_args(args) -> dict[str, list[str]]:  # noqa: ANN001
+    """The arm's flags: the robot configuration (validated here first: a bad file fails before anything
+    starts), and the emulated bus."""
+    out: list[str] = []
+    if args.robot_config:
+        from services.arm.drivers.dynamixel.robot_config import load_robot_config
+
+        load_robot_config(args.robot_config)
+        out += ["--robot-config", str(Path(args.robot_config).resolve())]
+    if args.emulate_bus:
+        if args.backend != "sim":
+            raise SystemExit("--emulate-bus runs with the sim cell (--backend sim)")
+        out += ["--backend", "dynamixel", "--emulate-bus"]
+    return {"arm": out} if out else {}
 
 
 def run(args) -> int:  # noqa: ANN001
@@ -31,11 +52,16 @@ def run(args) -> int:  # noqa: ANN001
         print(f"unknown services: {', '.join(sorted(unknown))}")
         return 2
     backend = {"real": "real", "sim": "sim", "replay": "replay"}[args.backend]
+    try:
+        extra = arm_args(args)
+    except ObjscanError as exc:  # a bad robot configuration: say which key, start nothing
+        print(f"error [{exc.code}]: {exc.message}")
+        return 2
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     with ServiceGroup(args.port, log_dir=Path(args.log_dir)) as group:
-        specs = cell_specs(names, backend=backend)
+        specs = cell_specs(names, backend=backend, extra_args=extra)
         print(f"starting router on {group.endpoint} and {len(specs)} services (logs in {args.log_dir}/)")
         group.launch(specs)
         print("all services live; Ctrl-C to stop. 'objscan status' lists them.")

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import json
 
+import yaml
+
+from services.arm.drivers.dynamixel.robot_config import DEFAULT_ROBOT_CONFIG
 from services.cli.main import main
 
 
@@ -21,3 +24,14 @@ def test_devices_names_a_missing_port(capsys):
     assert main(["devices", "--port", "/dev/objscan-no-such-port", "--json"]) == 1
     out = json.loads(capsys.readouterr().out)
     assert out["error"]["code"] == "port_unavailable" and "/dev/objscan-no-such-port" in out["error"]["message"]
+
+
+def test_up_refuses_a_bad_robot_config_before_starting_anything(tmp_path, capsys):
+    data = yaml.safe_load(DEFAULT_ROBOT_CONFIG.read_text())
+    data["joints"]["robot1/joint1"]["speed"] = 3  # not a key
+    bad = tmp_path / "arm.yaml"
+    bad.write_text(yaml.safe_dump(data))
+    assert main(["up", "--robot-config", str(bad), "--port", "1", "--log-dir", str(tmp_path / "logs")]) == 2
+    out = capsys.readouterr().out
+    assert "bad_robot_config" in out and "robot1/joint1" in out and "speed" in out
+    assert not (tmp_path / "logs").exists()
