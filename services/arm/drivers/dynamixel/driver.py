@@ -278,7 +278,10 @@ class DynamixelArmDriver(ArmDriver):
         """Hardware Error Status of every joint (and the gripper): any bit set is a typed ``servo_error``."""
         bad: dict[int, int] = {}
         for grp in self._groups:
-            res = grp.errors.txRxPacket()
+            for _ in range(self.config.retries + 1):
+                res = grp.errors.txRxPacket()
+                if res == COMM_SUCCESS:
+                    break
             if res != COMM_SUCCESS:
                 raise DriverError("hardware error read failed", code="servo_silent",
                                   detail={"result": self._ph.getTxRxResult(res)})

@@ -22,6 +22,7 @@ import logging
 import threading
 
 import numpy as np
+from dynamixel_sdk import port_handler
 
 from services.arm.drivers.base import ArmDriver
 from services.arm.drivers.dynamixel.config import DynamixelConfig
@@ -121,6 +122,9 @@ class EmulatedBusDriver(DynamixelArmDriver):
         # the emulator shares this process (and its GIL) with the planner and the twin link: on a loaded
         # machine a status packet can miss the SDK's ~34 ms timeout, which a real bus would not; retry more
         self.config.retries = max(self.config.retries, 4)
+        # and the SDK's packet timeout (2 x its 16 ms FTDI latency constant + 2 ms) is widened: only this
+        # process talks to an emulated bus, no real one
+        port_handler.LATENCY_TIMER = max(port_handler.LATENCY_TIMER, 50)
         self.bridge = BusTwinBridge(self.config, twin, rate_hz)
 
     def connect(self) -> None:
