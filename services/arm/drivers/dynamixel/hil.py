@@ -24,7 +24,9 @@ import threading
 import numpy as np
 from dynamixel_sdk import port_handler
 
+from common.log import event
 from services.arm.drivers.base import ArmDriver
+from services.arm.drivers.dynamixel import protocol as p
 from services.arm.drivers.dynamixel.config import DynamixelConfig
 from services.arm.drivers.dynamixel.driver import DynamixelArmDriver
 from services.arm.drivers.dynamixel.emulator import DynamixelBusEmulator, servos_for
@@ -136,6 +138,8 @@ class EmulatedBusDriver(DynamixelArmDriver):
         except Exception:
             self.bridge.stop()
             raise
+        event(log, "dynamixel driver on an emulated bus driving the twin", port=self.config.port,
+              servos={i: v["model"] for i, v in self.servo_info.items()})
 
     @property
     def last_gripper(self) -> object:
@@ -153,7 +157,11 @@ class EmulatedBusDriver(DynamixelArmDriver):
         return present
 
     def close(self) -> None:
+        emu = self.bridge.emulator
         try:
             super().close()
         finally:
+            if emu is not None:
+                event(log, "emulated bus closed", sync_writes=len(emu.packets(p.SYNC_WRITE)),
+                      sync_reads=len(emu.packets(p.SYNC_READ)), twin_updates=self.bridge.sent)
             self.bridge.stop()
