@@ -17,7 +17,7 @@ from pathlib import Path
 import open3d as o3d
 import pytest
 
-from common.launcher import free_tcp_port
+from common.zenoh_config import free_tcp_port
 
 REPO = Path(__file__).resolve().parents[2]
 
