@@ -132,7 +132,11 @@ class ArmService(Service):
         await self.run_cpu(self.arm.close)
 
     def health_info(self) -> dict[str, object]:
-        return {"backend": self.backend, "estopped": self.arm.estopped}
+        info: dict[str, object] = {"backend": self.backend, "estopped": self.arm.estopped}
+        servos = getattr(self.arm.driver, "servo_info", None)  # dynamixel: what answered at connect
+        if servos:
+            info["servos"] = {str(i): v["model"] for i, v in servos.items()}
+        return info
 
 
 def main() -> None:
