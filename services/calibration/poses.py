@@ -15,8 +15,8 @@ from services.orchestrator.planning import arm_side_azimuth_deg, camera_pose_loo
 
 
 def calibration_views(board_center: np.ndarray, n: int = 15, seed: int = 0, *,
-                      distances: tuple[float, float] = (0.33, 0.45), elevations_deg: tuple[float, float] = (50.0, 80.0),
-                      azimuth_span_deg: float = 70.0, roll_deg: float = 25.0) -> list[np.ndarray]:
+                      distances: tuple[float, float] = (0.30, 0.38), elevations_deg: tuple[float, float] = (38.0, 62.0),
+                      azimuth_span_deg: float = 40.0, roll_deg: float = 25.0) -> list[np.ndarray]:
     """``n`` camera poses (T_base_camera) looking at ``board_center``; deterministic for a seed.
 
     Views are laid on a golden-angle spiral over the azimuth/elevation window (even coverage for any n)

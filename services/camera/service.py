@@ -3,6 +3,10 @@
 The backend (sim, realsense, replay) is chosen at start; the orchestrator cannot tell them apart. For
 real cameras the frame is stamped with the camera pose the arm believes (asked from ``arm/state``); the
 sim's twin stamps its own belief; a replay returns what was recorded.
+
+A hand-eye calibration file (``--hand-eye FILE`` or ``$OBJSCAN_HAND_EYE``, written by ``objscan calibrate
+hand-eye``) is loaded at start and corrects every live frame's pose (sim and realsense, not replay, whose
+poses were stamped when recorded); the frame's ``meta["hand_eye"]`` says which file and correction.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ from common.codec import Message
 from common.errors import ObjscanError
 from common.messages import JointState, RGBDFrame
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from services.calibration.file import calibration_from_env
 from services.camera.factory import make_camera
 
 
@@ -34,6 +39,8 @@ class CameraService(Service):
                 config["playback_file"] = opts["playback"]
         elif self.backend == "replay":
             config["session_dir"] = opts["session"]
+        # a broken or missing calibration file stops the start: stamping uncorrected poses would be silent
+        self.hand_eye, self.hand_eye_path = calibration_from_env(opts.get("hand_eye"))
         self.camera = make_camera(config, render_request=self._render if self.backend == "sim" else None)
         await self.run_cpu(self.camera.connect)
         self.captures = 0
@@ -58,6 +65,11 @@ class CameraService(Service):
         else:
             pose = await self._arm_camera_pose() if self.backend == "realsense" else None
             frame = await self.run_cpu(self.camera.capture, pose)
+        if self.hand_eye is not None and self.backend != "replay":
+            frame.T_base_camera = self.hand_eye.apply(frame.T_base_camera)
+            frame.meta = {**(frame.meta or {}), "hand_eye": {
+                "file": self.hand_eye_path, "correction": self.hand_eye.correction.tolist(),
+                "T_gripper_camera": self.hand_eye.T_gripper_camera.tolist()}}
         self.captures += 1
         return frame
 
@@ -65,7 +77,7 @@ class CameraService(Service):
         await self.run_cpu(self.camera.disconnect)
 
     def health_info(self) -> dict[str, object]:
-        return {"backend": self.backend, "captures": self.captures}
+        return {"backend": self.backend, "captures": self.captures, "hand_eye": self.hand_eye_path}
 
 
 def main() -> None:
@@ -75,10 +87,12 @@ def main() -> None:
     p.add_argument("--height", type=int, default=480)
     p.add_argument("--session", help="replay: the session folder to serve frames from")
     p.add_argument("--playback", help="realsense: play a .db3 recording instead of a live camera")
+    p.add_argument("--hand-eye", default=None, metavar="FILE",
+                   help="hand-eye calibration file to correct poses with (default: env OBJSCAN_HAND_EYE)")
     args = p.parse_args()
     backend = "realsense" if args.backend == "real" else args.backend
     if backend == "replay" and not args.session:
         p.error("--backend replay needs --session SESSION_DIR")
     run_service(lambda: CameraService(settings_from_args(args, backend=backend, width=args.width,
                                                          height=args.height, session=args.session,
-                                                         playback=args.playback)))
+                                                         playback=args.playback, hand_eye=args.hand_eye)))

@@ -22,6 +22,7 @@ COMMANDS = [
     "services.cli.cmd_report",
     "services.cli.cmd_replay",
     "services.cli.cmd_certs",
+    "services.cli.cmd_calibrate",
 ]
 
 
