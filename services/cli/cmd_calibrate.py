@@ -71,7 +71,7 @@ def run(args) -> int:  # noqa: ANN001
 
 
 def _calibrate(session, args, cfg: ProcedureConfig, out: Path, t0: float) -> int:  # noqa: ANN001
-    if args.backend == "sim" and not args.connect:
+    if args.backend == "sim":  # with --connect too: the sim service must then be part of that cell
         x, y = cfg.board_xy
         request_sync(session, keys.sim(args.robot, "world"), Request(params={
             "op": "reset", "object": "charuco", "profile": args.profile, "seed": args.seed, "x": x, "y": y}),
