@@ -11,6 +11,8 @@ poses were stamped when recorded); the frame's ``meta["hand_eye"]`` says which f
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from common import keys
@@ -34,7 +36,9 @@ class CameraService(Service):
             # generous: the twin renders in ~60 ms, but a loaded 2-core machine can stall it for seconds
             config.update(width=opts.get("width", 640), height=opts.get("height", 480), timeout_s=60.0)
         elif self.backend == "realsense":
-            config.update(width=opts.get("width", 640), height=opts.get("height", 480))
+            config.update(width=opts.get("width", 640), height=opts.get("height", 480),
+                          serial=opts.get("serial"), visual_preset=opts.get("visual_preset", "high_accuracy"),
+                          lock_exposure=not opts.get("no_exposure_lock", False))
             if opts.get("playback"):
                 config["playback_file"] = opts["playback"]
         elif self.backend == "replay":
@@ -87,6 +91,13 @@ def main() -> None:
     p.add_argument("--height", type=int, default=480)
     p.add_argument("--session", help="replay: the session folder to serve frames from")
     p.add_argument("--playback", help="realsense: play a .db3 recording instead of a live camera")
+    p.add_argument("--serial", default=os.environ.get("OBJSCAN_CAMERA_SERIAL") or None,
+                   help="realsense: the camera to open when several are attached (default: env OBJSCAN_CAMERA_SERIAL)")
+    p.add_argument("--visual-preset", default=os.environ.get("OBJSCAN_CAMERA_PRESET", "high_accuracy"),
+                   help="realsense: D400 depth preset (default: env OBJSCAN_CAMERA_PRESET or %(default)s; 'none' "
+                        "leaves the camera's)")
+    p.add_argument("--no-exposure-lock", action="store_true",
+                   help="realsense: keep auto exposure / white balance on (default: locked after warm-up)")
     p.add_argument("--hand-eye", default=None, metavar="FILE",
                    help="hand-eye calibration file to correct poses with (default: env OBJSCAN_HAND_EYE)")
     args = p.parse_args()
@@ -95,4 +106,7 @@ def main() -> None:
         p.error("--backend replay needs --session SESSION_DIR")
     run_service(lambda: CameraService(settings_from_args(args, backend=backend, width=args.width,
                                                          height=args.height, session=args.session,
-                                                         playback=args.playback, hand_eye=args.hand_eye)))
+                                                         playback=args.playback, hand_eye=args.hand_eye,
+                                                         serial=args.serial, no_exposure_lock=args.no_exposure_lock,
+                                                         visual_preset=None if args.visual_preset == "none"
+                                                         else args.visual_preset)))
