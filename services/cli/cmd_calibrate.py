@@ -15,13 +15,13 @@ from pathlib import Path
 
 from common import keys
 from common.api import MoveRequest
-from common.client import live_services, request_sync
+from common.client import request_sync
 from common.errors import ObjscanError
 from common.messages import Request
 from common.session_folder import atomic_write_json
-from common.zenoh_config import DEFAULT_ROUTER_PORT, open_session
+from common.zenoh_config import DEFAULT_ROUTER_PORT
 from services.calibration.procedure import ProcedureConfig, run_procedure
-from services.cli.cells import add_network_args, network_settings
+from services.cli.cells import add_network_args, remote_session
 from services.cli.cmd_scan import console, ensure_cell
 
 
@@ -55,13 +55,12 @@ def run(args) -> int:  # noqa: ANN001
     out = Path(args.out)
     t0 = time.time()
     if args.connect:
-        session = open_session(network_settings(args.connect))
         try:
-            live = {s for s, _ in live_services(session, timeout=2.0)}
-            missing = [s for s in ("arm", "camera") if s not in live]
-            if missing:
-                console.print(f"[red]no {', '.join(missing)} service on {args.connect}[/red]: start the cell first")
-                return 1
+            session = remote_session(args.connect, ["arm", "camera"] + (["sim"] if args.backend == "sim" else []))
+        except ObjscanError as exc:
+            console.print(f"[red]{exc.message}[/red]")
+            return 1
+        try:
             return _calibrate(session, args, cfg, out, t0)
         finally:
             session.close()
