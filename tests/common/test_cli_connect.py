@@ -29,7 +29,7 @@ def test_session_names_sent_to_a_remote_cell():
             session_name(bad)
 
 
-@pytest.mark.parametrize("argv", [["status"], ["call", "objscan/x"], ["scan"], ["capture", "--out", "x"],
+@pytest.mark.parametrize("argv", [["status"], ["call", "objscan/x"], ["scan"], ["capture", "--out", "x"], ["up"],
                                   ["calibrate", "hand-eye"]])
 def test_cell_commands_take_connect(argv, monkeypatch):
     monkeypatch.delenv("OBJSCAN_ZENOH_CONNECT", raising=False)
@@ -61,3 +61,29 @@ def test_scan_connect_refuses_a_client_path(service_group):
                            "--out", "/home/me/x"], capture_output=True, text=True, timeout=60,
                           env={"PATH": "/usr/bin:/bin", "COLUMNS": "200", "OMP_NUM_THREADS": "1"})
     assert proc.returncode == 2 and "relative to the cell's sessions root" in proc.stdout
+
+
+def test_up_connect_joins_a_running_router(service_group, tmp_path):
+    """``objscan up --connect`` starts services on an existing network and no router of its own."""
+    import signal
+    import time
+
+    from common.client import live_services
+
+    proc = subprocess.Popen([sys.executable, "-m", "services.cli", "up", "--only", "grasp", "--connect",
+                             service_group.endpoint, "--log-dir", str(tmp_path / "up-logs")],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env={"PATH": "/usr/bin:/bin", "OMP_NUM_THREADS": "1"}, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            if "grasp" in {s for s, _ in live_services(service_group.session, timeout=1.0)}:
+                break
+            assert proc.poll() is None, proc.stdout.read()
+        else:
+            pytest.fail("grasp never joined the router")
+        assert not (tmp_path / "up-logs" / "router.log").exists()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        out = proc.communicate(timeout=60)[0]
+    assert f"joining {service_group.endpoint}" in out
