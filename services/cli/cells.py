@@ -55,7 +55,11 @@ def remote_session(connect: str, needed: list[str], robot_services_timeout: floa
     from common.errors import ServiceUnavailable
     from common.zenoh_config import open_session
 
-    session = open_session(network_settings(connect))
+    try:
+        session = open_session(network_settings(connect))
+    except (FileNotFoundError, ValueError) as exc:  # a TLS file or setting named in the environment is wrong
+        raise ServiceUnavailable(f"cannot join {connect}: {exc}", code="bad_network_config",
+                                 detail={"connect": connect}) from None
     live = {s for s, _ in live_services(session, timeout=robot_services_timeout)}
     missing = [s for s in needed if s not in live]
     if missing:

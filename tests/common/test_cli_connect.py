@@ -87,3 +87,11 @@ def test_up_connect_joins_a_running_router(service_group, tmp_path):
         proc.send_signal(signal.SIGINT)
         out = proc.communicate(timeout=60)[0]
     assert f"joining {service_group.endpoint}" in out
+
+
+def test_a_missing_tls_file_is_a_clear_error(tmp_path):
+    env = {"PATH": "/usr/bin:/bin", "COLUMNS": "200", "OMP_NUM_THREADS": "1",
+           "OBJSCAN_ZENOH_TLS_CA": str(tmp_path / "nope" / "ca.pem")}
+    proc = subprocess.run([sys.executable, "-m", "services.cli", "scan", "--connect", "tls/127.0.0.1:9", "--out",
+                           "x"], capture_output=True, text=True, timeout=60, env=env)
+    assert proc.returncode == 1 and "ca.pem does not exist" in proc.stdout, proc.stdout + proc.stderr
