@@ -22,6 +22,7 @@ from common.errors import ObjscanError
 from common.messages import JointState, RGBDFrame
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
 from services.calibration.file import calibration_from_env
+from services.camera.base import POSE_SOURCE_KEY
 from services.camera.factory import make_camera
 
 
@@ -69,7 +70,8 @@ class CameraService(Service):
         else:
             pose = await self._arm_camera_pose() if self.backend == "realsense" else None
             frame = await self.run_cpu(self.camera.capture, pose)
-        if self.hand_eye is not None and self.backend != "replay":
+        # correct live poses only: a replay's were stamped when recorded, an unknown one stays recognisable
+        if self.hand_eye is not None and self.backend != "replay" and frame.meta.get(POSE_SOURCE_KEY) != "unknown":
             frame.T_base_camera = self.hand_eye.apply(frame.T_base_camera)
             frame.meta = {**(frame.meta or {}), "hand_eye": {
                 "file": self.hand_eye_path, "correction": self.hand_eye.correction.tolist(),
