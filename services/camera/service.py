@@ -3,9 +3,15 @@
 The backend (sim, realsense, replay) is chosen at start; the orchestrator cannot tell them apart. For
 real cameras the frame is stamped with the camera pose the arm believes (asked from ``arm/state``); the
 sim's twin stamps its own belief; a replay returns what was recorded.
+
+A hand-eye calibration file (``--hand-eye FILE`` or ``$OBJSCAN_HAND_EYE``, written by ``objscan calibrate
+hand-eye``) is loaded at start and corrects every live frame's pose (sim and realsense, not replay, whose
+poses were stamped when recorded); the frame's ``meta["hand_eye"]`` says which file and correction.
 """
 
 from __future__ import annotations
+
+import os
 
 import numpy as np
 
@@ -15,6 +21,8 @@ from common.codec import Message
 from common.errors import ObjscanError
 from common.messages import JointState, RGBDFrame
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from services.calibration.file import calibration_from_env
+from services.camera.base import POSE_SOURCE_KEY
 from services.camera.factory import make_camera
 
 
@@ -29,11 +37,15 @@ class CameraService(Service):
             # generous: the twin renders in ~60 ms, but a loaded 2-core machine can stall it for seconds
             config.update(width=opts.get("width", 640), height=opts.get("height", 480), timeout_s=60.0)
         elif self.backend == "realsense":
-            config.update(width=opts.get("width", 640), height=opts.get("height", 480))
+            config.update(width=opts.get("width", 640), height=opts.get("height", 480),
+                          serial=opts.get("serial"), visual_preset=opts.get("visual_preset", "high_accuracy"),
+                          lock_exposure=not opts.get("no_exposure_lock", False))
             if opts.get("playback"):
                 config["playback_file"] = opts["playback"]
         elif self.backend == "replay":
             config["session_dir"] = opts["session"]
+        # a broken or missing calibration file stops the start: stamping uncorrected poses would be silent
+        self.hand_eye, self.hand_eye_path = calibration_from_env(opts.get("hand_eye"))
         self.camera = make_camera(config, render_request=self._render if self.backend == "sim" else None)
         await self.run_cpu(self.camera.connect)
         self.captures = 0
@@ -58,6 +70,12 @@ class CameraService(Service):
         else:
             pose = await self._arm_camera_pose() if self.backend == "realsense" else None
             frame = await self.run_cpu(self.camera.capture, pose)
+        # correct live poses only: a replay's were stamped when recorded, an unknown one stays recognisable
+        if self.hand_eye is not None and self.backend != "replay" and frame.meta.get(POSE_SOURCE_KEY) != "unknown":
+            frame.T_base_camera = self.hand_eye.apply(frame.T_base_camera)
+            frame.meta = {**(frame.meta or {}), "hand_eye": {
+                "file": self.hand_eye_path, "correction": self.hand_eye.correction.tolist(),
+                "T_gripper_camera": self.hand_eye.T_gripper_camera.tolist()}}
         self.captures += 1
         return frame
 
@@ -65,7 +83,7 @@ class CameraService(Service):
         await self.run_cpu(self.camera.disconnect)
 
     def health_info(self) -> dict[str, object]:
-        return {"backend": self.backend, "captures": self.captures}
+        return {"backend": self.backend, "captures": self.captures, "hand_eye": self.hand_eye_path}
 
 
 def main() -> None:
@@ -75,10 +93,22 @@ def main() -> None:
     p.add_argument("--height", type=int, default=480)
     p.add_argument("--session", help="replay: the session folder to serve frames from")
     p.add_argument("--playback", help="realsense: play a .db3 recording instead of a live camera")
+    p.add_argument("--serial", default=os.environ.get("OBJSCAN_CAMERA_SERIAL") or None,
+                   help="realsense: the camera to open when several are attached (default: env OBJSCAN_CAMERA_SERIAL)")
+    p.add_argument("--visual-preset", default=os.environ.get("OBJSCAN_CAMERA_PRESET", "high_accuracy"),
+                   help="realsense: D400 depth preset (default: env OBJSCAN_CAMERA_PRESET or %(default)s; 'none' "
+                        "leaves the camera's)")
+    p.add_argument("--no-exposure-lock", action="store_true",
+                   help="realsense: keep auto exposure / white balance on (default: locked after warm-up)")
+    p.add_argument("--hand-eye", default=None, metavar="FILE",
+                   help="hand-eye calibration file to correct poses with (default: env OBJSCAN_HAND_EYE)")
     args = p.parse_args()
     backend = "realsense" if args.backend == "real" else args.backend
     if backend == "replay" and not args.session:
         p.error("--backend replay needs --session SESSION_DIR")
     run_service(lambda: CameraService(settings_from_args(args, backend=backend, width=args.width,
                                                          height=args.height, session=args.session,
-                                                         playback=args.playback)))
+                                                         playback=args.playback, hand_eye=args.hand_eye,
+                                                         serial=args.serial, no_exposure_lock=args.no_exposure_lock,
+                                                         visual_preset=None if args.visual_preset == "none"
+                                                         else args.visual_preset)))

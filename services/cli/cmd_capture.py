@@ -17,9 +17,11 @@ from PIL import Image
 from common import keys
 from common.api import CaptureRequest, MoveRequest
 from common.client import request_sync
+from common.errors import ObjscanError
 from common.messages import Request
 from common.session_folder import atomic_write_bytes, atomic_write_json
 from common.zenoh_config import DEFAULT_ROUTER_PORT
+from services.cli.cells import add_network_args, remote_session
 from services.cli.cmd_scan import console, ensure_cell
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.planning import look_pose
@@ -38,7 +40,25 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--session", help="replay: session folder to read frames from")
     p.add_argument("--out", required=True, help="folder to write color.png, depth.png, meta.json")
     p.add_argument("--port", type=int, default=DEFAULT_ROUTER_PORT)
+    add_network_args(p)
     p.set_defaults(func=run)
+
+
+def _capture(s, args, robot: str):  # noqa: ANN001, ANN202 - zenoh session, argparse namespace
+    """(frame, capture ms): on the sim, the board/object is placed and the camera aimed at it first."""
+    if args.backend == "sim":
+        cfg = AcquisitionConfig()
+        x, y = cfg.workspace_center
+        request_sync(s, keys.sim(robot, "world"), Request(params={
+            "op": "reset", "object": args.object, "profile": args.profile, "seed": args.seed, "x": x, "y": y}),
+            timeout=120)
+        request_sync(s, keys.arm(robot, "move"), MoveRequest(
+            kind="pose", target=look_pose(np.array([x, y, 0.0]), cfg.scan), frame="camera", speed_scale=0.6),
+            timeout=120)
+    t0 = time.perf_counter()
+    frame = request_sync(s, keys.camera_capture(robot), CaptureRequest(width=args.width, height=args.height),
+                         timeout=60)
+    return frame, (time.perf_counter() - t0) * 1e3
 
 
 def run(args) -> int:  # noqa: ANN001
@@ -47,21 +67,19 @@ def run(args) -> int:  # noqa: ANN001
     services = ["sim", "arm", "camera"] if args.backend == "sim" else ["camera"]
     extra = {"camera": ["--session", args.session]} if args.backend == "replay" and args.session else None
     robot = keys.DEFAULT_ROBOT
-    with ensure_cell(args.port, args.backend, out / "logs", services=services, extra_args=extra) as group:
-        s = group.session
-        if args.backend == "sim":
-            cfg = AcquisitionConfig()
-            x, y = cfg.workspace_center
-            request_sync(s, keys.sim(robot, "world"), Request(params={
-                "op": "reset", "object": args.object, "profile": args.profile, "seed": args.seed, "x": x, "y": y}),
-                timeout=120)
-            request_sync(s, keys.arm(robot, "move"), MoveRequest(
-                kind="pose", target=look_pose(np.array([x, y, 0.0]), cfg.scan), frame="camera", speed_scale=0.6),
-                timeout=120)
-        t0 = time.perf_counter()
-        frame = request_sync(s, keys.camera_capture(robot), CaptureRequest(width=args.width, height=args.height),
-                             timeout=60)
-        ms = (time.perf_counter() - t0) * 1e3
+    if args.connect:  # a running cell elsewhere: use its services, start nothing
+        try:
+            session = remote_session(args.connect, services)
+        except ObjscanError as exc:
+            console.print(f"[red]{exc.message}[/red]")
+            return 1
+        try:
+            frame, ms = _capture(session, args, robot)
+        finally:
+            session.close()
+    else:
+        with ensure_cell(args.port, args.backend, out / "logs", services=services, extra_args=extra) as group:
+            frame, ms = _capture(group.session, args, robot)
     import io
 
     for name, img in (("color.png", Image.fromarray(np.ascontiguousarray(frame.color), "RGB")),

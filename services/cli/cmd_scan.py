@@ -26,7 +26,7 @@ from common.errors import ObjscanError
 from common.launcher import ServiceGroup
 from common.messages import Ok, Request
 from common.zenoh_config import DEFAULT_ROUTER_PORT
-from services.cli.cells import SERVICE_MODULES, cell_specs
+from services.cli.cells import SERVICE_MODULES, add_network_args, cell_specs, remote_session, session_name
 
 console = Console()
 
@@ -58,6 +58,7 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--no-record", action="store_true", help="do not record the session to session.mcap")
     p.add_argument("--library", help="model library folder the model is added to (default: the orchestrator's)")
     p.add_argument("--robot", default=keys.DEFAULT_ROBOT)
+    add_network_args(p)
     p.set_defaults(func=run)
 
 
@@ -107,46 +108,66 @@ def arm_args(args) -> dict[str, list[str]]:  # noqa: ANN001
 def run(args) -> int:  # noqa: ANN001
     t0 = time.time()
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # unwind: the services this started are stopped
-    session_dir = Path(args.resume or args.out or f"sessions/{Path(args.object).stem}-{time.strftime('%Y%m%d-%H%M%S')}")
-    session_dir = session_dir.resolve()
+    name = args.resume or args.out or f"sessions/{Path(args.object).stem}-{time.strftime('%Y%m%d-%H%M%S')}"
+    if args.connect:  # a remote cell (compose, another machine): its orchestrator owns the sessions folder
+        try:
+            target = session_name(name)
+        except ValueError as exc:
+            console.print(f"[red]{exc}[/red]")
+            return 2
+        try:
+            session = remote_session(args.connect, ["orchestrator"])
+        except ObjscanError as exc:
+            console.print(f"[red]{exc.message}[/red]")
+            return 1
+        try:
+            return _acquire(session, args, target, None, t0)
+        finally:
+            session.close()
+    session_dir = Path(name).resolve()
     with ensure_cell(args.port, args.backend, session_dir / "logs", extra_args=arm_args(args)) as group:
-        session = group.session
-        updates: queue.Queue[dict[str, Any]] = queue.Queue()
+        return _acquire(group.session, args, str(session_dir), session_dir, t0)
 
-        def on_status(sample) -> None:  # noqa: ANN001 - zenoh thread: decode and hand over
-            try:
-                msg = decode(sample.payload.to_bytes())
-            except ObjscanError:
-                return
-            if isinstance(msg, Ok):
-                updates.put(msg.info)
 
-        sub = session.declare_subscriber(keys.orchestrator(args.robot, "status"), on_status)
-        params: dict[str, Any]
-        if args.resume:
-            params = {"resume": str(session_dir)}
-        else:
-            params = {"out": str(session_dir), "config": {
-                "object": args.object, "views": args.views, "profile": args.profile, "seed": args.seed,
-                "width": args.width, "height": args.height, "force_first_slip": args.force_first_slip}}
-            params["record"] = not args.no_record
-            if args.library:
-                params["library"] = str(Path(args.library).resolve())
-        reply = request_sync(session, keys.orchestrator(args.robot, "run"), Request(params=params), timeout=30)
-        console.print(f"session: {reply.info['session']}" + (" (resumed)" if reply.info.get("resumed") else ""))
-        stop_sent = False
+def _acquire(session, args, target: str, session_dir: Path | None, t0: float) -> int:  # noqa: ANN001
+    """Start (or resume) the acquisition at ``target`` and follow it to the end."""
+    updates: queue.Queue[dict[str, Any]] = queue.Queue()
 
-        def on_sigint(*_: object) -> None:
-            nonlocal stop_sent
-            if not stop_sent:
-                stop_sent = True
-                console.print("[yellow]stopping: e-stop sent to the arm[/yellow]")
-                request_sync(session, keys.orchestrator(args.robot, "stop"), timeout=10)
+    def on_status(sample) -> None:  # noqa: ANN001 - zenoh thread: decode and hand over
+        try:
+            msg = decode(sample.payload.to_bytes())
+        except ObjscanError:
+            return
+        if isinstance(msg, Ok):
+            updates.put(msg.info)
 
-        signal.signal(signal.SIGINT, on_sigint)
-        final = _follow(updates, args.views if not args.resume else None)
-        sub.undeclare()
-    return _summary(final, session_dir, time.time() - t0)
+    sub = session.declare_subscriber(keys.orchestrator(args.robot, "status"), on_status)
+    params: dict[str, Any]
+    if args.resume:
+        params = {"resume": target}
+    else:
+        params = {"out": target, "config": {
+            "object": args.object, "views": args.views, "profile": args.profile, "seed": args.seed,
+            "width": args.width, "height": args.height, "force_first_slip": args.force_first_slip}}
+        params["record"] = not args.no_record
+        if args.library:
+            params["library"] = str(Path(args.library).resolve())
+    reply = request_sync(session, keys.orchestrator(args.robot, "run"), Request(params=params), timeout=30)
+    console.print(f"session: {reply.info['session']}" + (" (resumed)" if reply.info.get("resumed") else ""))
+    stop_sent = False
+
+    def on_sigint(*_: object) -> None:
+        nonlocal stop_sent
+        if not stop_sent:
+            stop_sent = True
+            console.print("[yellow]stopping: e-stop sent to the arm[/yellow]")
+            request_sync(session, keys.orchestrator(args.robot, "stop"), timeout=10)
+
+    signal.signal(signal.SIGINT, on_sigint)
+    final = _follow(updates, args.views if not args.resume else None)
+    sub.undeclare()
+    shown = session_dir if session_dir is not None else Path(str(reply.info["session"]))
+    return _summary(final, shown, time.time() - t0, resume_arg=target if session_dir is None else str(shown))
 
 
 def _follow(updates: queue.Queue[dict[str, Any]], views: int | None) -> dict[str, Any]:
@@ -168,7 +189,7 @@ def _follow(updates: queue.Queue[dict[str, Any]], views: int | None) -> dict[str
                 return last
 
 
-def _summary(final: dict[str, Any], session_dir: Path, seconds: float) -> int:
+def _summary(final: dict[str, Any], session_dir: Path, seconds: float, resume_arg: str | None = None) -> int:
     status = final.get("status")
     if status == "done":
         console.print(f"[green]done[/green] in {seconds:.0f} s. model: {final.get('model')}")
@@ -180,5 +201,5 @@ def _summary(final: dict[str, Any], session_dir: Path, seconds: float) -> int:
         return 0
     err = final.get("last_error") or {}
     console.print(f"[red]{status}[/red] in state {final.get('state')}: {json.dumps(err)}")
-    console.print(f"resume with: objscan scan --resume {session_dir}")
+    console.print(f"resume with: objscan scan --resume {resume_arg or session_dir}")
     return 1

@@ -1,4 +1,8 @@
-"""``objscan up``: start the router and every service as its own process; Ctrl-C stops them all."""
+"""``objscan up``: start the router and every service as its own process; Ctrl-C stops them all.
+
+With ``--connect`` (or ``OBJSCAN_ZENOH_CONNECT``) no router is started: the services join that network
+(TLS variables included), e.g. to add registration workers on a second machine.
+"""
 
 from __future__ import annotations
 
@@ -10,7 +14,7 @@ from pathlib import Path
 from common.errors import ObjscanError
 from common.launcher import ServiceGroup
 from common.zenoh_config import DEFAULT_ROUTER_PORT
-from services.cli.cells import SERVICE_MODULES, cell_specs
+from services.cli.cells import SERVICE_MODULES, add_network_args, cell_specs, network_settings
 
 
 def register(sub) -> None:  # noqa: ANN001
@@ -26,6 +30,7 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--port", type=int, default=DEFAULT_ROUTER_PORT, help="router port (default: %(default)s)")
     p.add_argument("--only", help=f"comma-separated subset of: {', '.join(SERVICE_MODULES)}")
     p.add_argument("--log-dir", default="logs", help="one log file per process (default: %(default)s)")
+    add_network_args(p)
     p.set_defaults(func=run)
 
 
@@ -60,9 +65,13 @@ def run(args) -> int:  # noqa: ANN001
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    with ServiceGroup(args.port, log_dir=Path(args.log_dir)) as group:
+    with ServiceGroup(args.port, log_dir=Path(args.log_dir), start_router=not args.connect) as group:
+        if args.connect:  # join a running router (TLS variables honoured) instead of starting one
+            group.settings = network_settings(args.connect)
+            group.endpoint = args.connect
         specs = cell_specs(names, backend=backend, extra_args=extra)
-        print(f"starting router on {group.endpoint} and {len(specs)} services (logs in {args.log_dir}/)")
+        what = f"joining {group.endpoint} with" if args.connect else f"starting router on {group.endpoint} and"
+        print(f"{what} {len(specs)} services (logs in {args.log_dir}/)")
         group.launch(specs)
         print("all services live; Ctrl-C to stop. 'objscan status' lists them.")
         while not stop.is_set():

@@ -23,6 +23,7 @@ COMMANDS = [
     "services.cli.cmd_replay",
     "services.cli.cmd_certs",
     "services.cli.cmd_devices",
+    "services.cli.cmd_calibrate",
 ]
 
 

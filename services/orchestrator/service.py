@@ -50,14 +50,15 @@ class OrchestratorService(Service):
                                detail={"session": str(self.current.store.path) if self.current else None})
         params = msg.params if isinstance(msg, Request) else {}
         if params.get("resume"):
-            path = Path(params["resume"])
+            path = self._in_root(params["resume"])
             store = SessionStore(path)
             if store.load_journal() is None:
                 raise InvalidRequest(f"{path} has no journal.json to resume from")
             config = AcquisitionConfig()
         else:
             out = params.get("out")
-            path = Path(out) if out else self.sessions_root / f"session-{int(asyncio.get_running_loop().time())}"
+            default = f"session-{int(asyncio.get_running_loop().time())}"
+            path = self._in_root(out or default)
             if (path / "journal.json").exists():
                 raise InvalidRequest(f"{path} already holds a session; use resume or another folder")
             store = SessionStore(path)
@@ -71,6 +72,12 @@ class OrchestratorService(Service):
             self.session, self.robot, enabled=params.get("record", True))
         self.task = self.spawn(run)
         return Ok(info={"session": str(path.resolve()), "resumed": self.current.resumed})
+
+    def _in_root(self, path: str) -> Path:
+        """A relative session path is relative to the sessions root (what a remote CLI sends, so sessions
+        land inside the sessions volume); an absolute one is taken as given."""
+        p = Path(str(path))
+        return p if p.is_absolute() else self.sessions_root / p
 
     async def status(self, msg: Message | None, ctx: QueryContext) -> Ok:
         return Ok(info=self.current.status() if self.current else self.last_status)

@@ -279,6 +279,8 @@ def load_object(name_or_path: str, *, scale: float | None = None, up_axis: str |
     each call returns an object with its own ``mesh`` copy. Raises ``SimObjectError`` when the name is
     unknown, the file is missing, or the mesh is unreadable, empty, non-finite or flat.
     """
+    if str(name_or_path).strip() == CHARUCO_OBJECT:
+        return charuco_object()
     name, path, is_hope = resolve_object(name_or_path)
     if scale is None:
         scale = HOPE_SCALE if is_hope else 1.0
@@ -296,6 +298,26 @@ def load_object(name_or_path: str, *, scale: float | None = None, up_axis: str |
         with _CACHE_LOCK:
             _CACHE.setdefault(key, cached)
     return cached.copy()
+
+
+#: The built-in calibration target: ``load_object("charuco")`` is the hand-eye board as a thin plate.
+CHARUCO_OBJECT = "charuco"
+
+
+def charuco_object() -> SimObject:
+    """The ChArUco board of ``services.calibration.board.CharucoSpec()`` as a textured plate (its print on
+    top), so the twin renders exactly the board the hand-eye procedure looks for."""
+    from services.calibration.board import CharucoSpec, board_plate_mesh
+
+    spec = CharucoSpec()
+    V, F, uvs, mats = board_plate_mesh(spec)
+    tex = spec.image()
+    legacy = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(V), o3d.utility.Vector3iVector(F))
+    legacy.compute_vertex_normals()
+    for a in (V, F, tex, uvs, mats):
+        a.setflags(write=False)
+    return SimObject(name=CHARUCO_OBJECT, mesh=legacy, vertices=V, triangles=F, textures=[tex], triangle_uvs=uvs,
+                     triangle_material_ids=mats, scale=1.0, up_axis="z")
 
 
 def clear_cache() -> None:

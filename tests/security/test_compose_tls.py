@@ -12,10 +12,11 @@ import pytest
 import yaml
 
 from services.cli.cmd_certs import IDENTITIES
+from tests.support import compose
 
 REPO = Path(__file__).resolve().parents[2]
 BASE = yaml.safe_load((REPO / "docker-compose.yml").read_text())
-TLS = yaml.safe_load((REPO / "deploy" / "docker-compose.tls.yml").read_text())
+TLS = compose.load(REPO / "deploy" / "docker-compose.tls.yml")  # it uses compose's !override tag
 SERVICES = [n for n in BASE["services"] if n != "zenoh-router"]
 
 

@@ -11,6 +11,10 @@ Per capture: drop frames queued while the arm was moving (live only), pull ``fra
 framesets through the optional spatial/temporal filters, align depth to color with
 ``rs.align(rs.stream.color)``, and copy both images out of librealsense's frame pool. Intrinsics and depth
 scale come from the device, never from a preset.
+
+Live cameras also get the depth visual preset and an exposure/white balance locked after the warm-up
+(``control.py``), and survive a USB drop: after ``timeouts_before_reset`` consecutive frame timeouts the
+device is ``hardware_reset`` and the pipeline restarted with the same locked exposure.
 """
 
 from __future__ import annotations
@@ -33,6 +37,13 @@ from services.camera.errors import (
     ReplayDataError,
 )
 from services.camera.realsense.config import RealSenseCameraConfig
+from services.camera.realsense.control import (
+    ExposureState,
+    apply_exposure,
+    apply_visual_preset,
+    frame_metadata,
+    lock_exposure,
+)
 
 PLAYBACK_SUFFIXES = (".db3", ".bag")
 _POLL_MS = 50
@@ -75,6 +86,20 @@ def intrinsics_from_rs(intr: Any) -> Intrinsics:
                       fy=float32_value(intr.fy), cx=float32_value(intr.ppx), cy=float32_value(intr.ppy))
 
 
+def choose_serial(attached: list[str], wanted: str | None) -> str:
+    """The serial to open: ``wanted`` when attached; the only camera when none is wanted; else a clear error."""
+    if wanted is not None:
+        if wanted not in attached:
+            raise NoDeviceError(f"no RealSense camera with serial {wanted} is attached",
+                                detail={"attached": attached})
+        return wanted
+    if len(attached) > 1:
+        raise NoDeviceError(f"{len(attached)} RealSense cameras are attached ({', '.join(attached)}): choose one "
+                            "with --serial (camera service) or OBJSCAN_CAMERA_SERIAL", code="ambiguous_camera",
+                            detail={"attached": attached})
+    return attached[0]
+
+
 class RealSenseCamera(Camera):
     """A D435 through pyrealsense2 (live, playback, or an injected device such as a software D435)."""
 
@@ -90,6 +115,10 @@ class RealSenseCamera(Camera):
         self._playback: Any = None
         self._depth_scale = 0.0
         self._device_info: dict[str, Any] = {}
+        self._device: Any = None
+        self._exposure: ExposureState | None = None
+        self._preset: str | None = None
+        self.reconnects = 0
 
     # ------------------------------------------------------------------------------------------ open
     def _open(self) -> None:
@@ -128,11 +157,18 @@ class RealSenseCamera(Camera):
                 raise CameraError(f"the device has no depth sensor with a depth scale: {exc}",
                                   code="no_depth") from None
             self._device_info = self._describe(rs, device, profile)
+            self._device = device
             self._align = rs.align(rs.stream.color)
             self._spatial = rs.spatial_filter() if self.config.spatial_filter else None
             if self.config.playback_file is None:
+                self._preset = apply_visual_preset(rs, device, self.config.visual_preset)
+                if self._exposure is not None and self._exposure.locked:  # reconnected: keep the run's exposure
+                    self._exposure = apply_exposure(rs, device, self._exposure)
+                frames = None
                 for _ in range(self.config.warmup_frames):
-                    self._wait_frames()
+                    frames = self._wait_frames(reconnect=False)
+                if self.config.lock_exposure and (self._exposure is None or not self._exposure.locked):
+                    self._exposure = lock_exposure(rs, device, frames.get_color_frame() if frames else None)
         except BaseException:
             self._stop_pipeline()
             raise
@@ -167,12 +203,8 @@ class RealSenseCamera(Camera):
                 "no RealSense camera is attached: plug the D435 into a USB 3 port and make sure the udev "
                 "rules are installed (docs/camera.md); to run without one use the sim or replay backend, "
                 "or set playback_file")
-        if self.config.serial is not None:
-            if self.config.serial not in serials:
-                raise NoDeviceError(f"no RealSense camera with serial {self.config.serial} is attached",
-                                    detail={"attached": serials})
-            return self.config.serial
-        return serials[0]
+        # a reconnect reopens the same camera even when no serial was configured
+        return choose_serial(serials, self.config.serial or self._device_info.get("serial"))
 
     def _describe(self, rs: Any, device: Any, profile: Any) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -191,8 +223,49 @@ class RealSenseCamera(Camera):
         return out
 
     # ------------------------------------------------------------------------------------------ grab
-    def _wait_frames(self) -> Any:
-        """Next frameset; ``end_of_replay`` when a playback has run out, ``timeout`` otherwise."""
+    def _wait_frames(self, reconnect: bool = True) -> Any:
+        """Next frameset; ``end_of_replay`` when a playback has run out, ``timeout`` otherwise.
+
+        A live camera that times out ``timeouts_before_reset`` times in a row is reset and reopened once
+        (``reconnect``) before the timeout is reported.
+        """
+        n = self.config.timeouts_before_reset
+        if not reconnect or self._playback is not None or n == 0:
+            return self._wait_once()
+        for attempt in range(n + 1):
+            try:
+                return self._wait_once()
+            except CaptureTimeout:
+                if attempt == n:
+                    raise
+                if attempt == n - 1:
+                    self._reconnect()
+        raise AssertionError("unreachable")  # pragma: no cover
+
+    def _hardware_reset(self, device: Any) -> None:
+        """Power-cycle the camera over USB (it re-enumerates within a few seconds)."""
+        device.hardware_reset()
+
+    def _reconnect(self) -> None:
+        """hardware_reset the device, then restart the pipeline with the same settings and exposure."""
+        device = self._device
+        self._stop_pipeline()
+        if device is not None:
+            try:
+                self._hardware_reset(device)
+            except RuntimeError:  # a device that cannot reset (playback, software): restarting is all we can do
+                pass
+        self.reconnects += 1
+        for attempt in range(3):  # the camera re-enumerates on USB within a few seconds of the reset
+            time.sleep(self.config.reset_wait_s)
+            try:
+                self._open()
+                return
+            except NoDeviceError:
+                if attempt == 2:
+                    raise
+
+    def _wait_once(self) -> Any:
         rs = _rs()
         deadline = time.monotonic() + self.config.timeout_ms / 1000.0
         while True:
@@ -242,6 +315,13 @@ class RealSenseCamera(Camera):
         }
         if "serial" in self._device_info:
             meta["serial"] = self._device_info["serial"]
+        if self._playback is None:
+            meta["visual_preset"] = self._preset
+            md = rs.frame_metadata_value
+            meta["exposure"] = {**(self._exposure or ExposureState()).as_meta(),
+                                "frame_exposure_us": frame_metadata(color_f, md.actual_exposure),
+                                "frame_white_balance_k": frame_metadata(color_f, md.white_balance)}
+            meta["reconnects"] = self.reconnects
         T = stamp_pose(meta, T_base_camera)
         stamp = float(color_f.get_timestamp()) / 1000.0 if self._playback is not None else time.time()
         return RGBDFrame(color=color, depth=depth, depth_scale=units if units > 0 else self._depth_scale,
@@ -260,7 +340,9 @@ class RealSenseCamera(Camera):
         self._stop_pipeline()
 
     def _info(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"depth_scale": self._depth_scale, **self._device_info}
+        out: dict[str, Any] = {"depth_scale": self._depth_scale, **self._device_info, "reconnects": self.reconnects,
+                               "visual_preset": self._preset,
+                               "exposure": None if self._exposure is None else self._exposure.as_meta()}
         if self.config.playback_file is not None:
             out["playback_file"] = str(self.config.playback_file)
         return out

@@ -7,6 +7,7 @@ from typing import ClassVar
 
 from services.camera.base import CameraConfig
 from services.camera.errors import CameraConfigError
+from services.camera.realsense.control import VISUAL_PRESETS
 
 
 @dataclass
@@ -25,6 +26,11 @@ class RealSenseCameraConfig(CameraConfig):
     - ``playback_file``: a ``.db3`` (or legacy ``.bag``) recording to play instead of a live camera; it is
       played non-real-time, so every frame is served once, in order, deterministically.
     - ``timeout_ms``: how long a capture waits for a frame before ``timeout``.
+    - ``visual_preset``: the depth sensor's D400 preset (``high_accuracy`` by default; None leaves it).
+    - ``lock_exposure``: settle auto exposure / white balance during ``warmup_frames``, then switch them
+      off and hold those values for the whole run (recorded in every frame's ``meta["exposure"]``).
+    - ``timeouts_before_reset``: consecutive frame timeouts after which the camera is ``hardware_reset``
+      and its pipeline restarted (a USB drop); 0 never resets. ``reset_wait_s``: time for it to come back.
     """
 
     backend: ClassVar[str] = "realsense"
@@ -39,12 +45,26 @@ class RealSenseCameraConfig(CameraConfig):
     temporal_filter: bool = False
     playback_file: str | None = None
     timeout_ms: int = 5000
+    visual_preset: str | None = "high_accuracy"
+    lock_exposure: bool = True
+    timeouts_before_reset: int = 2
+    reset_wait_s: float = 3.0
 
     def __post_init__(self) -> None:
         for name in ("width", "height", "fps", "frames_per_capture", "timeout_ms"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
                 raise CameraConfigError(f"{name} must be a positive integer", detail={name: value})
+        if self.visual_preset is not None and self.visual_preset not in VISUAL_PRESETS:
+            raise CameraConfigError(f"unknown visual preset {self.visual_preset!r}; known: {', '.join(VISUAL_PRESETS)}",
+                                    detail={"visual_preset": self.visual_preset})
+        if not isinstance(self.timeouts_before_reset, int) or self.timeouts_before_reset < 0:
+            raise CameraConfigError("timeouts_before_reset must be a non-negative integer",
+                                    detail={"timeouts_before_reset": self.timeouts_before_reset})
+        if not (isinstance(self.reset_wait_s, (int, float)) and 0 <= self.reset_wait_s <= 60):
+            raise CameraConfigError("reset_wait_s must be in [0, 60]", detail={"reset_wait_s": self.reset_wait_s})
+        if self.serial is not None and not (isinstance(self.serial, str) and self.serial.strip()):
+            raise CameraConfigError("serial must be a non-empty string", detail={"serial": self.serial})
         if not isinstance(self.warmup_frames, int) or self.warmup_frames < 0:
             raise CameraConfigError("warmup_frames must be a non-negative integer",
                                     detail={"warmup_frames": self.warmup_frames})

@@ -12,6 +12,16 @@ Verified with pyrealsense2 2.59.1:
   missing and the last depth frame renumbered;
 - ``depth_units`` must be registered as a read-only option on the depth sensor for
   ``first_depth_sensor().get_depth_scale()`` to work, and is also stamped on every depth frame.
+- options added with ``add_option`` read back their *minimum* until set, so defaults are set explicitly;
+  ``rs.option_range(min, max, step, default)`` stores step and default swapped, so its fields are assigned;
+  ``set_metadata`` on a software sensor stamps that metadata on the frames pushed after it.
+
+Camera controls are emulated (``SoftwareD435Spec.emulate_controls``): the color sensor offers auto
+exposure / exposure / gain / auto white balance / white balance, the depth sensor a visual preset. While
+auto exposure is on, the exposure drifts from frame to frame (as a real auto loop hunts) and, with
+``exposure_scales_color``, the injected color is scaled by it; each frame carries the exposure, gain and
+white balance in force as metadata.
+``stall()`` stops frames from coming through (a USB drop) until ``resume()``.
 """
 
 from __future__ import annotations
@@ -50,6 +60,9 @@ class SoftwareD435Spec:
     fps: int = 30
     serial: str = "000000000000"
     name: str = "Intel RealSense D435 (software)"
+    emulate_controls: bool = True
+    nominal_exposure_us: float = 156.0
+    exposure_scales_color: bool = False  # injected color x (exposure / nominal): shows what drifting AE does
 
 
 def _rs_intrinsics(rs: Any, intr: Intrinsics) -> Any:
@@ -88,6 +101,43 @@ class SoftwareD435:
         self._depth_profile.register_extrinsics_to(self._color_profile, ext)
         dev.create_matcher(rs.matchers.dlr_c)  # pair depth and color by frame number, like a D400
         self.device = dev
+        self._stalled = threading.Event()
+        if s.emulate_controls:
+            self._add_controls(rs)
+
+    def _add_controls(self, rs: Any) -> None:
+        o = rs.option
+        for sensor, opt, lo, hi, step, default in (
+                (self._color_sensor, o.enable_auto_exposure, 0, 1, 1, 1),
+                (self._color_sensor, o.exposure, 1, 10000, 1, self.spec.nominal_exposure_us),
+                (self._color_sensor, o.gain, 0, 128, 1, 64),
+                (self._color_sensor, o.enable_auto_white_balance, 0, 1, 1, 1),
+                (self._color_sensor, o.white_balance, 2800, 6500, 10, 4600),
+                (self._depth_sensor, o.visual_preset, 0, 6, 1, 0)):
+            rng = rs.option_range()  # attributes, not the constructor: 2.59 swaps its step and default
+            rng.min, rng.max, rng.step, rng.default = float(lo), float(hi), float(step), float(default)
+            sensor.add_option(opt, rng, True)
+            sensor.set_option(opt, float(default))
+
+    def controls(self) -> tuple[float, float, float]:
+        """(exposure us, gain, white balance K) in force for the next frame: drifting while auto is on."""
+        rs = _rs()
+        cs, o = self._color_sensor, rs.option
+        n = self._frame_number
+        if cs.get_option(o.enable_auto_exposure) > 0.5:
+            exposure = self.spec.nominal_exposure_us * (1.0 + 0.3 * np.sin(n / 4.0))
+        else:
+            exposure = cs.get_option(o.exposure)
+        wb = 4600.0 + 400.0 * np.sin(n / 6.0) if cs.get_option(o.enable_auto_white_balance) > 0.5 \
+            else cs.get_option(o.white_balance)
+        return float(round(exposure)), float(cs.get_option(o.gain)), float(round(wb / 10) * 10)
+
+    def stall(self) -> None:
+        """Frames stop coming through, as when the camera drops off USB."""
+        self._stalled.set()
+
+    def resume(self) -> None:
+        self._stalled.clear()
 
     def _add_stream(self, rs: Any, sensor: Any, kind: Any, fmt: Any, bpp: int, intr: Intrinsics,
                     uid: int) -> Any:
@@ -111,8 +161,18 @@ class SoftwareD435:
             raise BadFrameError("injected color must be uint8 HxWx3 of the color stream's size",
                                 detail={"shape": list(color.shape), "dtype": str(color.dtype)})
         with self._lock:
+            if self._stalled.is_set():
+                return self._frame_number
             self._frame_number += 1  # starts at 1: see the module notes
             n = self._frame_number
+            if self.spec.emulate_controls:
+                exposure, gain, wb = self.controls()
+                md = rs.frame_metadata_value
+                for key, value in ((md.actual_exposure, exposure), (md.gain_level, gain), (md.white_balance, wb)):
+                    self._color_sensor.set_metadata(key, int(value))
+                gain_factor = exposure / self.spec.nominal_exposure_us
+                if self.spec.exposure_scales_color and abs(gain_factor - 1.0) > 1e-9:
+                    color = np.clip(color * gain_factor + 0.5, 0, 255).astype(np.uint8)
             stamp_ms = n * 1000.0 / self.spec.fps
             for sensor, profile, pixels, bpp in ((self._depth_sensor, self._depth_profile, depth, 2),
                                                  (self._color_sensor, self._color_profile, color, 3)):
