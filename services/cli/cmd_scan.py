@@ -27,6 +27,7 @@ from common.launcher import ServiceGroup
 from common.messages import Ok, Request
 from common.zenoh_config import DEFAULT_ROUTER_PORT
 from services.cli.cells import SERVICE_MODULES, cell_specs
+from services.cli.outcome import print_json
 
 console = Console()
 
@@ -51,6 +52,8 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--no-record", action="store_true", help="do not record the session to session.mcap")
     p.add_argument("--library", help="model library folder the model is added to (default: the orchestrator's)")
     p.add_argument("--robot", default=keys.DEFAULT_ROBOT)
+    p.add_argument("--json", dest="json_output", action="store_true",
+                   help="no progress bar; print one JSON object at the end (status, session, model, accuracy)")
     p.set_defaults(func=run)
 
 
@@ -85,6 +88,7 @@ def ensure_cell(port: int, backend: str, log_dir: Path, services: list[str] | No
 
 def run(args) -> int:  # noqa: ANN001
     t0 = time.time()
+    console.quiet = bool(args.json_output)  # stdout is the JSON document only
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # unwind: the services this started are stopped
     session_dir = Path(args.resume or args.out or f"sessions/{Path(args.object).stem}-{time.strftime('%Y%m%d-%H%M%S')}")
     session_dir = session_dir.resolve()
@@ -125,6 +129,8 @@ def run(args) -> int:  # noqa: ANN001
         signal.signal(signal.SIGINT, on_sigint)
         final = _follow(updates, args.views if not args.resume else None)
         sub.undeclare()
+    if args.json_output:
+        return _summary_json(final, session_dir, time.time() - t0)
     return _summary(final, session_dir, time.time() - t0)
 
 
@@ -145,6 +151,19 @@ def _follow(updates: queue.Queue[dict[str, Any]], views: int | None) -> dict[str
                                         + (f" (attempts {status['attempts']})" if status.get("attempts") else ""))
             if status.get("status") in ("done", "failed", "stopped"):
                 return last
+
+
+def _summary_json(final: dict[str, Any], session_dir: Path, seconds: float) -> int:
+    """The scan's outcome as one JSON object: 0 when done, 1 otherwise (``error`` then holds the last one)."""
+    status = final.get("status")
+    doc = {"status": status, "state": final.get("state"), "session": str(session_dir),
+           "model": final.get("model"), "accuracy": final.get("accuracy"), "views": final.get("views"),
+           "views_done": final.get("views_done"), "seconds": round(seconds, 1),
+           "report": str(session_dir / "report.json")}
+    if status != "done":
+        doc["error"] = final.get("last_error") or {"code": status or "unknown", "message": "scan did not finish"}
+    print_json(doc)
+    return 0 if status == "done" else 1
 
 
 def _summary(final: dict[str, Any], session_dir: Path, seconds: float) -> int:
