@@ -28,6 +28,7 @@ from common.messages import Ok, Request
 from common.zenoh_config import DEFAULT_ROUTER_PORT
 from services.cli.cells import SERVICE_MODULES, cell_specs
 from services.cli.outcome import print_json
+from services.live import add_live_args, live_requested, open_live_view
 
 console = Console()
 
@@ -52,6 +53,7 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--no-record", action="store_true", help="do not record the session to session.mcap")
     p.add_argument("--library", help="model library folder the model is added to (default: the orchestrator's)")
     p.add_argument("--robot", default=keys.DEFAULT_ROBOT)
+    add_live_args(p)
     p.add_argument("--json", dest="json_output", action="store_true",
                    help="no progress bar; print one JSON object at the end (status, session, model, accuracy)")
     p.set_defaults(func=run)
@@ -105,6 +107,12 @@ def run(args) -> int:  # noqa: ANN001
                 updates.put(msg.info)
 
         sub = session.declare_subscriber(keys.orchestrator(args.robot, "status"), on_status)
+        live = open_live_view(args) if live_requested(args) else None
+        if live is not None:
+            live.subscribe(session, args.robot)
+            for sink in live.sinks:
+                if hasattr(sink, "port"):
+                    console.print(f"Foxglove: connect to ws://127.0.0.1:{sink.port}")
         params: dict[str, Any]
         if args.resume:
             params = {"resume": str(session_dir)}
@@ -115,6 +123,8 @@ def run(args) -> int:  # noqa: ANN001
             params["record"] = not args.no_record
             if args.library:
                 params["library"] = str(Path(args.library).resolve())
+        if live is not None:
+            params["live"] = True  # the orchestrator publishes each exchange on its tap (services/live/tap.py)
         reply = request_sync(session, keys.orchestrator(args.robot, "run"), Request(params=params), timeout=30)
         console.print(f"session: {reply.info['session']}" + (" (resumed)" if reply.info.get("resumed") else ""))
         stop_sent = False
@@ -127,8 +137,13 @@ def run(args) -> int:  # noqa: ANN001
                 request_sync(session, keys.orchestrator(args.robot, "stop"), timeout=10)
 
         signal.signal(signal.SIGINT, on_sigint)
-        final = _follow(updates, args.views if not args.resume else None)
-        sub.undeclare()
+        try:
+            final = _follow(updates, args.views if not args.resume else None)
+        finally:
+            sub.undeclare()
+            if live is not None:
+                time.sleep(0.5)  # the last exchanges (the model) travel just before the final status
+                live.close()
     if args.json_output:
         return _summary_json(final, session_dir, time.time() - t0)
     return _summary(final, session_dir, time.time() - t0)
