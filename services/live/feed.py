@@ -38,6 +38,7 @@ class LiveView:
 
     def __init__(self, sinks: list[Sink], *, state_rate_hz: float = 10.0):
         self.sinks = sinks
+        self.state_rate_hz = state_rate_hz
         self.scene = scene.SceneInterpreter(state_rate_hz)
         self.events: dict[str, int] = {}  # event type -> count drawn (what a caller can report)
         self._lock = threading.Lock()
@@ -53,6 +54,11 @@ class LiveView:
                     sink.handle(ev)
                 except Exception as exc:  # a viewer going away must not end the scan it watches
                     log_event(log, "live sink failed", logging.WARNING, sink=type(sink).__name__, error=str(exc))
+
+    def reset(self) -> None:
+        """Forget the scene's state (view number, pending grasp): a replay starts over."""
+        with self._lock:
+            self.scene = scene.SceneInterpreter(self.state_rate_hz)
 
     def exchange(self, t: float, key: str, request: Any, reply: Any) -> None:
         with self._lock:
@@ -105,8 +111,12 @@ class LiveView:
             sink.close()
 
 
-def replay_recording(source: str | Path, view: LiveView) -> dict[str, int]:
-    """Send a recorded session (folder or ``.mcap``) through ``view`` in recorded order; return event counts."""
+def replay_recording(source: str | Path, view: LiveView, *, speed: float | None = None) -> dict[str, int]:
+    """Send a recorded session (folder or ``.mcap``) through ``view`` in recorded order; return event counts.
+
+    ``speed``: None sends everything at once (a file sink); a number paces the replay at that multiple of
+    the recorded time (a WebSocket viewer sees it unfold like the live scan).
+    """
     from services.recording.reader import read_recording
 
     rec = read_recording(source)
@@ -115,7 +125,10 @@ def replay_recording(source: str | Path, view: LiveView) -> dict[str, int]:
         if topic.endswith("/arm/state") or topic.endswith("/orchestrator/status"):
             items += [(t, 1, payload) for t, payload in samples]
     items.sort(key=lambda it: (it[0], it[1]))
+    t0, w0 = (items[0][0] if items else 0.0), time.monotonic()
     for t, kind, item in items:
+        if speed:
+            time.sleep(max(0.0, (t - t0) / speed - (time.monotonic() - w0)))
         try:
             if kind == 0:
                 view.exchange(t, item.key, item.request_message(), item.reply_message())
