@@ -32,9 +32,15 @@ ARM = "world/arm"
 URDF_ROOT_FRAME = "world"  # the PAPRAS URDF's root link, identical to ``base`` (robot1/link1 at the origin)
 
 
+def _a(x: object, dtype: str) -> np.ndarray:
+    """An aligned, C-contiguous copy-if-needed: decoded arrays point into the msgpack buffer at any offset,
+    and Rerun's Arrow import aborts the whole process (a Rust panic, not an exception) on unaligned memory."""
+    return np.require(np.asarray(x, dtype=dtype), requirements=["C", "A"])
+
+
 def _points(cloud: PointCloud, default_rgb: tuple[int, int, int]) -> rr.Points3D:
-    xyz = np.asarray(cloud.xyz, dtype=np.float32)
-    rgb = np.asarray(cloud.rgb, dtype=np.uint8) if cloud.rgb is not None and len(cloud.rgb) == len(xyz) else None
+    xyz = _a(cloud.xyz, "f4")
+    rgb = _a(cloud.rgb, "u1") if cloud.rgb is not None and len(cloud.rgb) == len(xyz) else None
     return rr.Points3D(xyz, colors=rgb if rgb is not None else [default_rgb], radii=0.0015)
 
 
@@ -69,7 +75,8 @@ class RerunSink:
     def _joints(self, t: float, names: list[str], q: np.ndarray, *, static: bool = False) -> None:
         for joint, T in joint_transforms(self.joints, names, q, include_fixed=static):
             self.rec.log(f"{ARM}/joints/{rr.escape_entity_path_part(joint.name)}",
-                         rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3], parent_frame=joint.parent,
+                         rr.Transform3D(translation=_a(T[:3, 3], "f8"), mat3x3=_a(T[:3, :3], "f8"),
+                                        parent_frame=joint.parent,
                                         child_frame=joint.child), static=static)
 
     def handle(self, event: scene.Event) -> None:
@@ -81,12 +88,13 @@ class RerunSink:
         if isinstance(event, scene.CameraFrame):
             f = event.frame
             i = f.intrinsics
-            rec.log("world/camera", rr.Transform3D(translation=f.T_base_camera[:3, 3], mat3x3=f.T_base_camera[:3, :3]))
+            T = _a(f.T_base_camera, "f8")
+            rec.log("world/camera", rr.Transform3D(translation=T[:3, 3].copy(), mat3x3=T[:3, :3].copy()))
             rec.log("world/camera/image", rr.Pinhole(focal_length=[i.fx, i.fy], principal_point=[i.cx, i.cy],
                                                      width=i.width, height=i.height,
                                                      camera_xyz=rr.ViewCoordinates.RDF, image_plane_distance=0.1))
-            rec.log("world/camera/image/color", rr.Image(np.ascontiguousarray(f.color), color_model="RGB"))
-            rec.log("world/camera/image/depth", rr.DepthImage(np.ascontiguousarray(f.depth),
+            rec.log("world/camera/image/color", rr.Image(_a(f.color, "u1"), color_model="RGB"))
+            rec.log("world/camera/image/depth", rr.DepthImage(_a(f.depth, "u2"),
                                                               meter=1.0 / float(f.depth_scale)))
         elif isinstance(event, scene.ArmState):
             self._joints(event.t, event.names, event.q)
@@ -94,13 +102,13 @@ class RerunSink:
             name = "locate" if event.view < 0 else f"{event.view:02d}"
             rec.log(f"world/views/{name}/object", _points(event.cloud, (120, 170, 255)))
         elif isinstance(event, scene.GraspCandidates):
-            P = np.asarray(event.poses)
+            P = _a(event.poses, "f8")
             approach = P[:, :3, 0] * 0.05  # gripper x = approach direction (docs/conventions.md)
             rec.log("world/grasps/candidates", rr.Arrows3D(origins=P[:, :3, 3] - approach, vectors=approach,
                                                            colors=[(255, 200, 0)], labels=event.kinds))
         elif isinstance(event, scene.ChosenGrasp):
-            T = event.pose
-            rec.log("world/grasps/chosen", rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]),
+            T = _a(event.pose, "f8")
+            rec.log("world/grasps/chosen", rr.Transform3D(translation=T[:3, 3].copy(), mat3x3=T[:3, :3].copy()),
                     rr.TransformAxes3D(axis_length=0.06))
         elif isinstance(event, scene.Model):
             rec.log("world/model", _points(event.cloud, (230, 230, 230)))

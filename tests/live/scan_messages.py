@@ -10,6 +10,7 @@ import numpy as np
 
 from common import keys
 from common.api import GraspPlanReply, GripperRequest, ModelResult, MoveRequest, MoveResult, ViewResult
+from common.codec import decode
 from common.messages import Grasp, Intrinsics, JointState, Ok, Plane, PointCloud, Pose, RGBDFrame
 from services.arm.drivers.base import JOINT_NAMES
 
@@ -66,6 +67,14 @@ def scan_items() -> list[tuple[str, float, object, object, object]]:
     items.append(("sample", t + 0.1, None, None, Ok(info={"state": "done", "view": 1, "views": 2, "views_done": 2,
                                                           "status": "done"})))
     return items
+
+
+def over_the_wire(items):  # noqa: ANN001, ANN201
+    """The same items after encode/decode, as the tap and the recording deliver them: arrays then point into
+    the msgpack buffer, unaligned (Rerun's Arrow import aborts the process on those unless they are copied)."""
+    def rt(m):  # noqa: ANN001, ANN202
+        return None if m is None else decode(m.encode())
+    return [(kind, t, key, rt(req), rt(msg)) for kind, t, key, req, msg in items]
 
 
 def feed(view, items) -> None:  # noqa: ANN001 - a LiveView

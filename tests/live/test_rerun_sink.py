@@ -8,13 +8,13 @@ from rerun.chunk import RrdReader
 from services.live import LiveView
 from services.live.rerun_sink import RerunSink
 from tests.live.rrd_entities import rrd_entities
-from tests.live.scan_messages import feed, scan_items
+from tests.live.scan_messages import feed, over_the_wire, scan_items
 
 
 def test_a_short_scan_streams_frames_poses_clouds_grasps_arm_and_model(tmp_path):
     path = tmp_path / "scan.rrd"
     view = LiveView([RerunSink(save=path)])
-    feed(view, scan_items())
+    feed(view, over_the_wire(scan_items()))
     view.close()
     ents = rrd_entities(path)
     # frames: colour and depth images under the camera's pinhole, the camera's pose per frame
