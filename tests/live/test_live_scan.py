@@ -1,6 +1,6 @@
 """A real short scan watched live: ``objscan scan --rerun-save`` through every service process, then the same
 session replayed into a second ``.rrd`` with ``objscan replay SESSION --rerun-save``. Both files are read back
-with the Rerun SDK. Slow: a whole 2-view acquisition (~2-4 minutes on a shared 2-core box).
+with the Rerun SDK. Slow: a whole 3-view acquisition (the fewest a model accepts; ~4-6 minutes on a shared 2-core box).
 """
 
 from __future__ import annotations
@@ -41,13 +41,13 @@ def _check_scene(ents: dict[str, dict[str, int]], views: int) -> None:
 def test_scan_streams_to_rrd_and_the_recording_replays_into_the_same_scene(tmp_path):
     shared_data("hope", "milk")
     live, replayed, session = tmp_path / "live.rrd", tmp_path / "replayed.rrd", tmp_path / "session"
-    res = _objscan("scan", "--object", "milk", "--views", "2", "--seed", "1", "--out", str(session),
+    res = _objscan("scan", "--object", "milk", "--views", "3", "--seed", "1", "--out", str(session),
                    "--port", str(free_tcp_port()), "--library", str(tmp_path / "models"), "--json",
                    "--rerun-save", str(live), timeout=1200)
     doc = json.loads(res.stdout)  # --json: stdout is one JSON document
     assert res.returncode == 0 and doc["status"] == "done", (doc, res.stderr[-3000:])
-    assert doc["views_done"] == 2 and Path(doc["model"]).is_file()
-    _check_scene(rrd_entities(live), 2)
+    assert doc["views_done"] == 3 and Path(doc["model"]).is_file()
+    _check_scene(rrd_entities(live), 3)
     res = _objscan("replay", str(session), "--rerun-save", str(replayed), timeout=600)
     assert res.returncode == 0, res.stderr[-3000:]
-    _check_scene(rrd_entities(replayed), 2)
+    _check_scene(rrd_entities(replayed), 3)
