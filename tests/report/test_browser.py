@@ -7,10 +7,12 @@ from __future__ import annotations
 
 import html
 import json
+import os
 import re
 import shutil
 import subprocess
 import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -98,3 +100,24 @@ def test_the_model_turns_zooms_and_recolours_in_the_browser(report, tmp_path):
     assert res["reset_restores"], res  # reset: the first view again (angle, zoom, error colouring)
     assert res["points"] > 5000 and res["ink"] > 5000, res  # the model covers the canvas, not a few dots
     assert res["ink_zoomed"] > res["ink"], res  # zooming in makes it bigger
+
+
+VIEWER_ONLY = ("<style>body>*:not(section.model3d){display:none}</style><script>document.querySelectorAll('section')"
+               ".forEach(s=>{if(s.querySelector('#model3d'))s.className='model3d';});</script></body>")
+
+
+def test_screenshot_of_the_interactive_model(report, tmp_path):
+    """What docs/images/report_model3d.png shows (OBJSCAN_DOCS_IMAGES=1 writes it): the Model section alone."""
+    page = tmp_path / "viewer.html"
+    page.write_text(report.read_text().replace("</body>", VIEWER_ONLY))
+    shot = tmp_path / "model3d.png"
+    proc = chromium(f"--screenshot={shot}", "--window-size=780,640", "--virtual-time-budget=10000", page.as_uri())
+    assert proc.returncode == 0 and shot.is_file(), proc.stderr[-2000:]
+    img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    # the error colouring is viridis: purple-blue-green-yellow, no red; count the canvas' coloured pixels
+    sat = img.max(axis=2) - img.min(axis=2) > 40
+    assert sat.sum() > 8000, sat.sum()
+    greenish = sat & (img[..., 1] > img[..., 0])  # viridis is greener than red over most of its range
+    assert greenish.sum() > 0.5 * sat.sum()
+    if os.environ.get("OBJSCAN_DOCS_IMAGES") == "1":
+        shutil.copy(shot, Path(__file__).resolve().parents[2] / "docs" / "images" / "report_model3d.png")
