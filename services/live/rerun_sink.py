@@ -16,6 +16,7 @@ Time: the ``time`` timeline (wall clock of each event) and the ``view`` sequence
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -27,9 +28,18 @@ from services.arm.robot import URDF_PATH
 from services.live import scene
 from services.live.urdf_joints import joint_transforms, load_joints
 
+log = logging.getLogger("objscan.live")
 APP_ID = "objscan"
 ARM = "world/arm"
 URDF_ROOT_FRAME = "world"  # the PAPRAS URDF's root link, identical to ``base`` (robot1/link1 at the origin)
+
+
+def viewer_executable() -> Path:
+    """The Rerun viewer inside the installed rerun-sdk wheel (``rerun_cli/rerun``): found even when the
+    venv's ``bin`` is not on PATH (``.venv/bin/objscan`` run without activating the venv)."""
+    import rerun_cli
+
+    return Path(rerun_cli.__file__).resolve().parent / "rerun"
 
 
 def _a(x: object, dtype: str) -> np.ndarray:
@@ -50,12 +60,17 @@ class RerunSink:
     def __init__(self, *, save: str | Path | None = None, spawn: bool = False, recording_id: str | None = None,
                  urdf: str | Path = URDF_PATH):
         self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
+        sinks: list[rr.FileSink | rr.GrpcSink] = []
         if save is not None:
             Path(save).parent.mkdir(parents=True, exist_ok=True)
-            self.rec.save(str(save))
+            sinks.append(rr.FileSink(str(save)))
         if spawn:
             # the viewer binary ships in the rerun-sdk wheel (rerun_cli); nothing is downloaded
-            self.rec.spawn(connect=save is None)
+            rr.spawn(connect=False, executable_path=str(viewer_executable()), hide_welcome_screen=True,
+                     recording=self.rec)
+            sinks.append(rr.GrpcSink())  # the spawned viewer's default address
+        if sinks:
+            self.rec.set_sinks(*sinks)  # both at once when asked for both
         self.joints = load_joints(urdf)
         self.view = -1
         self._static(urdf)
@@ -118,5 +133,8 @@ class RerunSink:
                                          f"{s.get('views')} views) {s.get('status')}"))
 
     def close(self) -> None:
-        self.rec.flush()
+        try:
+            self.rec.flush()
+        except RuntimeError as exc:  # the spawned viewer was closed (or could not open a window): not a failure
+            log.warning("Rerun viewer went away before the end: %s", exc)
         self.rec.disconnect()
