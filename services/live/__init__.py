@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
-from services.live.feed import LiveView, replay_recording
+if TYPE_CHECKING:  # the CLI imports this package for its flags; the heavy parts load only when used
+    from services.live.feed import LiveView
 
-__all__ = ["LiveView", "add_live_args", "live_requested", "open_live_view", "replay_recording"]
+__all__ = ["add_live_args", "live_requested", "open_live_view", "replay_recording"]
 
 
 def add_live_args(p: argparse.ArgumentParser) -> None:
@@ -32,7 +34,9 @@ def live_requested(args: argparse.Namespace) -> bool:
 
 def open_live_view(args: argparse.Namespace) -> LiveView:
     """The sinks the flags ask for (imports rerun/foxglove only when asked)."""
-    sinks = []
+    from services.live.feed import LiveView
+
+    sinks: list[Any] = []
     if args.rerun or args.rerun_save:
         from services.live.rerun_sink import RerunSink
 
@@ -42,3 +46,10 @@ def open_live_view(args: argparse.Namespace) -> LiveView:
 
         sinks.append(FoxgloveSink(port=args.foxglove_port))
     return LiveView(sinks)
+
+
+def replay_recording(source: str | Path, view: LiveView, *, speed: float | None = None) -> dict[str, int]:
+    """``services.live.feed.replay_recording``: a recorded session into ``view``."""
+    from services.live.feed import replay_recording as replay
+
+    return replay(source, view, speed=speed)
