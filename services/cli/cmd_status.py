@@ -6,6 +6,8 @@ No router: exit 3 with one line (``no_router``); a router but no live service: e
 
 from __future__ import annotations
 
+import os
+from dataclasses import replace
 from typing import Any
 
 from rich.console import Console
@@ -44,8 +46,14 @@ def collect(session: Any, timeout: float) -> list[dict[str, Any]]:
     return rows
 
 
+STATUS_CONNECT_TIMEOUT_MS = 4000  # a router on the LAN answers in milliseconds; say "no router" within ~15 s
+
+
 def run(args) -> int:  # noqa: ANN001
-    session = open_session(network_settings(args.connect))
+    settings = network_settings(args.connect)
+    if "OBJSCAN_ZENOH_CONNECT_TIMEOUT_MS" not in os.environ:
+        settings = replace(settings, connect_timeout_ms=STATUS_CONNECT_TIMEOUT_MS)
+    session = open_session(settings)
     try:
         rows = collect(session, args.timeout)
     finally:
