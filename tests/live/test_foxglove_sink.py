@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
-from services.live import LiveView
+from services.live.feed import LiveView
 from services.live.foxglove_sink import FoxgloveSink
 from tests.live.scan_messages import feed, scan_items
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from rerun.chunk import RrdReader
 
-from services.live import LiveView
+from services.live.feed import LiveView
 from services.live.rerun_sink import RerunSink
 from tests.live.rrd_entities import rrd_entities
 from tests.live.scan_messages import feed, over_the_wire, scan_items
