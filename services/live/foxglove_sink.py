@@ -5,7 +5,8 @@ Topics and schemas are those of a recording's visual channels (``services/record
 the protobuf messages for both), so a live cell, a replay and a recorded ``.mcap`` look the same:
 ``/camera/color``, ``/camera/depth``, ``/camera/calibration``, ``/camera/capture_pose``, ``/tf`` (the URDF
 links' joint transforms, ``base`` = the URDF root), ``/arm/joints``, ``/views/NN/object``,
-``/locate/object``, ``/grasps``, ``/grasps/chosen``, ``/model`` and ``/status`` (``foxglove.Log``).
+``/locate/object``, ``/grasps``, ``/grasps/chosen``, ``/model_preview`` (the growing model),
+``/model`` and ``/status`` (``foxglove.Log``).
 Each sink has its own ``foxglove.Context``, so two sinks in one process never share channels.
 """
 
@@ -17,6 +18,7 @@ import foxglove
 import foxglove.messages as fm
 import numpy as np
 
+from common.messages import PointCloud
 from services.live import scene
 from services.live.urdf_joints import UrdfJoint, joint_transforms, load_joints
 from services.recording import visual
@@ -77,6 +79,9 @@ class FoxgloveSink:
             out.append(("/grasps/chosen", "foxglove.PoseInFrame",
                         fm.PoseInFrame(timestamp=visual.stamp(t), frame_id=visual.BASE,
                                        pose=visual.pose_msg(event.pose)).encode()))
+        elif isinstance(event, scene.ModelPreview):
+            out.append(("/model_preview", "foxglove.PointCloud",
+                        visual.point_cloud(t, PointCloud(xyz=event.xyz, rgb=event.rgb))))
         elif isinstance(event, scene.Model):
             out.append(("/model", "foxglove.PointCloud", visual.point_cloud(t, event.cloud)))
         elif isinstance(event, scene.Status):

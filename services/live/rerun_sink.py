@@ -8,7 +8,8 @@ Entity layout (``base`` is the arm base on the table, z up; every pose is ``T_ba
   loader), moved by one transform per joint (``world/arm/joints/<joint>``) from the joint states;
 - ``world/views/NN/object``: the isolated object cloud of view NN (``world/views/locate/object`` for the
   locate step); ``world/grasps/candidates`` the planned grasps (approach arrows), ``world/grasps/chosen``
-  the grasp the arm closed on; ``world/model`` the model cloud;
+  the grasp the arm closed on; ``world/model_preview`` the growing model (views placed by their commanded
+  turns, as the dynamic registration starts), cleared when ``world/model``, the registered model, arrives;
 - ``status``: the orchestrator's state as a text log.
 
 Time: the ``time`` timeline (wall clock of each event) and the ``view`` sequence.
@@ -125,8 +126,11 @@ class RerunSink:
             T = _a(event.pose, "f8")
             rec.log("world/grasps/chosen", rr.Transform3D(translation=T[:3, 3].copy(), mat3x3=T[:3, :3].copy()),
                     rr.TransformAxes3D(axis_length=0.06))
+        elif isinstance(event, scene.ModelPreview):
+            rec.log("world/model_preview", rr.Points3D(_a(event.xyz, "f4"), colors=_a(event.rgb, "u1"), radii=0.0015))
         elif isinstance(event, scene.Model):
             rec.log("world/model", _points(event.cloud, (230, 230, 230)))
+            rec.log("world/model_preview", rr.Clear(recursive=False))  # the registered model replaces it
         elif isinstance(event, scene.Status):
             s = event.info
             rec.log("status", rr.TextLog(f"view {s.get('view')}: {s.get('state')} ({s.get('views_done', 0)}/"

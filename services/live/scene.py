@@ -10,6 +10,9 @@ show the same scene, live or replayed.
 - ``ViewCloud``: the isolated object cloud of a view (``view = -1``: the locate step);
 - ``GraspCandidates``: the ranked grasps planned for a view (gripper poses in ``base``);
 - ``ChosenGrasp``: the grasp the arm closed on (the last gripper-frame move before a close);
+- ``ModelPreview``: the growing model while views come in: every registered view placed by undoing its
+  commanded turn about the table normal through the object centre (the dynamic registration's own
+  ``prerotation``, its starting point), so it is as good as the turns were; ``Model`` replaces it;
 - ``Model``: the model cloud when the dynamic registration returns it;
 - ``Status``: the orchestrator's status (state, view, views done).
 """
@@ -72,12 +75,52 @@ class Model:
 
 
 @dataclass
+class ModelPreview:
+    t: float
+    views: list[int]
+    xyz: np.ndarray  # (N, 3) float32 in view 0's base
+    rgb: np.ndarray  # (N, 3) uint8
+
+
+@dataclass
 class Status:
     t: float
     info: dict[str, Any]
 
 
-Event = CameraFrame | ArmState | ViewCloud | GraspCandidates | ChosenGrasp | Model | Status
+Event = CameraFrame | ArmState | ViewCloud | GraspCandidates | ChosenGrasp | ModelPreview | Model | Status
+
+PREVIEW_POINTS_PER_VIEW = 8000
+
+
+@dataclass
+class _Placed:
+    """What ``prerotation`` reads of a view: its object centre and its cumulative commanded turn."""
+
+    center: np.ndarray
+    commanded_turn_deg: float
+
+
+def preview(views: dict[int, ViewResult], turns_deg: list[float]) -> tuple[list[int], np.ndarray, np.ndarray]:
+    """Views with a known turn, stacked in view 0's frame by undoing their turns (subsampled per view)."""
+    from services.registration.dynamic.preprocess import prerotation
+
+    ks = sorted(k for k in views if 0 <= k < len(turns_deg))
+    if not ks or 0 not in views:
+        return [], np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8)
+    axis = np.asarray(views[0].table.normal, dtype=np.float64)
+    ref = np.asarray(views[0].center, dtype=np.float64)
+    xyzs, rgbs = [], []
+    for k in ks:
+        v = views[k]
+        xyz = np.asarray(v.cloud.xyz, dtype=np.float64)
+        rgb = (np.asarray(v.cloud.rgb, dtype=np.uint8) if v.cloud.rgb is not None
+               else np.full((len(xyz), 3), 170, np.uint8))
+        step = max(1, len(xyz) // PREVIEW_POINTS_PER_VIEW)
+        T = prerotation(_Placed(np.asarray(v.center, dtype=np.float64), float(turns_deg[k])), ref, axis)
+        xyzs.append((xyz[::step] @ T[:3, :3].T + T[:3, 3]).astype(np.float32))
+        rgbs.append(rgb[::step])
+    return ks, np.vstack(xyzs), np.vstack(rgbs)
 
 
 class SceneInterpreter:
@@ -88,6 +131,8 @@ class SceneInterpreter:
         self.state_period = 1.0 / state_rate_hz if state_rate_hz > 0 else 0.0
         self._last_state_t = -np.inf
         self._grasp_target: np.ndarray | None = None
+        self._views: dict[int, ViewResult] = {}
+        self._turns: list[float] = []
 
     def exchange(self, t: float, key: str, request: Any, reply: Any) -> list[Event]:
         """Events from one request and its reply (an ``Error`` reply shows nothing)."""
@@ -108,6 +153,9 @@ class SceneInterpreter:
         elif isinstance(reply, ViewResult):
             self.view = int(reply.view)
             out.append(ViewCloud(t, int(reply.view), reply.cloud))
+            if reply.view >= 0:
+                self._views[int(reply.view)] = reply
+                out += self._preview(t)
         elif isinstance(reply, GraspPlanReply) and reply.grasps:
             named = [g for g in reply.grasps if "grasp" in g.poses]
             poses = [np.asarray(g.poses["grasp"].matrix(), dtype=np.float64) for g in named]
@@ -127,5 +175,16 @@ class SceneInterpreter:
             return [ArmState(t, list(msg.names), np.asarray(msg.position, dtype=np.float64),
                              float(msg.gripper_opening))]
         if isinstance(msg, Ok) and "state" in msg.info:
-            return [Status(t, dict(msg.info))]
+            out: list[Event] = [Status(t, dict(msg.info))]
+            turns = msg.info.get("turns_deg")
+            if isinstance(turns, list) and len(turns) > len(self._turns):
+                known = {k for k in self._views if k < len(self._turns)}
+                self._turns = [float(x) for x in turns]
+                if {k for k in self._views if k < len(self._turns)} != known:
+                    out += self._preview(t)  # a view that arrived before its turn was known joins now
+            return out
         return []
+
+    def _preview(self, t: float) -> list[Event]:
+        ks, xyz, rgb = preview(self._views, self._turns)
+        return [ModelPreview(t, ks, xyz, rgb)] if ks else []

@@ -50,7 +50,8 @@ def scan_items() -> list[tuple[str, float, object, object, object]]:
         items.append(("sample", t, None, None, JointState(names=list(JOINT_NAMES), position=q + 0.1 * view,
                                                            stamp=t)))
         items.append(("sample", t + 0.01, None, None, Ok(info={"state": "scan", "view": view, "views": 2,
-                                                                "views_done": view, "status": "running"})))
+                                                                "views_done": view, "status": "running",
+                                                                "turns_deg": [0.0, 30.0][: view + 1]})))
         items.append(("exchange", t + 0.5, keys.arm(R, "move"), MoveRequest(kind="joints", q=q),
                       MoveResult(q=q + 0.1 * view, T_base_gripper=_T(0.3, 0, 0.3), T_base_camera=_T(0.3, 0, 0.4))))
         items.append(("exchange", t + 1.0, keys.camera_capture(R), None, _frame(view)))

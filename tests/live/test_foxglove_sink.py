@@ -24,7 +24,7 @@ from tests.live.scan_messages import feed, scan_items
 websockets_sync = pytest.importorskip("websockets.sync.client")
 
 EXPECTED = {"/camera/color", "/camera/depth", "/camera/calibration", "/camera/capture_pose", "/tf", "/arm/joints",
-            "/views/00/object", "/views/01/object", "/grasps", "/grasps/chosen", "/model", "/status"}
+            "/views/00/object", "/views/01/object", "/grasps", "/grasps/chosen", "/model", "/model_preview", "/status"}
 
 
 def _message_class(schema_name: str, schema_b64: str):  # noqa: ANN202

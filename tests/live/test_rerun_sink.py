@@ -28,6 +28,8 @@ def test_a_short_scan_streams_frames_poses_clouds_grasps_arm_and_model(tmp_path)
     assert ents["/world/grasps/candidates"]["Arrows3D:vectors"] == 2
     assert ents["/world/grasps/chosen"]["Transform3D:translation"] == 2
     assert ents["/world/model"]["Points3D:positions"] == 1
+    assert ents["/world/model_preview"]["Points3D:positions"] == 2  # after view 0, then views 0 and 1
+    assert ents["/world/model_preview"]["Clear:is_recursive"] == 1  # cleared when the model arrives
     # the arm: URDF meshes (static) and a transform per joint per state: the static zero pose, then
     # 2 joint-state samples and 4 move results
     meshes = [e for e in ents if e.startswith("/world/papras_6dof/visual_geometries/")]
