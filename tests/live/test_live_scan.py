@@ -35,6 +35,7 @@ def _check_scene(ents: dict[str, dict[str, int]], views: int) -> None:
     assert ents["/world/grasps/candidates"]["Arrows3D:vectors"] >= 1
     assert ents["/world/grasps/chosen"]["Transform3D:translation"] >= 1
     assert ents["/world/model"]["Points3D:positions"] == 1
+    assert ents["/world/model_preview"]["Points3D:positions"] >= views  # grows with every registered view
     assert ents["/world/arm/joints/robot1\\/joint2"]["Transform3D:child_frame"] > 10  # the arm moved
 
 
