@@ -7,6 +7,7 @@ RUN apt-get update \
  && rm -rf /var/lib/apt/lists/*
 
 WORKDIR /opt/objscan
+# the runtime lock only: test tools (pytest, hypothesis, atheris, ruff) live in requirements-dev.lock
 COPY requirements.lock pyproject.toml README.md ./
 RUN pip install --no-cache-dir uv \
  && uv pip install --system --no-cache -r requirements.lock

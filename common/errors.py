@@ -53,6 +53,12 @@ class ServiceUnavailable(ObjscanError):
     code = "unavailable"
 
 
+class RouterUnreachable(ServiceUnavailable):
+    """The Zenoh session could not be opened: no router or peer answers at the configured endpoints."""
+
+    code = "no_router"
+
+
 class RequestTimeout(ServiceUnavailable):
     """The request was sent but no reply came within its timeout."""
 

@@ -1,5 +1,8 @@
 """Structured logging: one line per event, ``key=value`` pairs, with service, instance and request id.
 
+An exception adds its last line (``exc=...``); at debug level (``OBJSCAN_LOG_LEVEL=debug``) the full
+traceback follows on indented lines.
+
 The request id travels in a context variable, so every line a handler logs (and every line logged in
 code it calls) names the request it belongs to without threading an argument through every call.
 """
@@ -26,7 +29,11 @@ class _KeyValueFormatter(logging.Formatter):
         line = (f"{ts} {record.levelname:<5} service={_service} instance={_instance} "
                 f"req={request_id.get()} {record.getMessage()}{extra}")
         if record.exc_info:
-            line += " exc=" + _fmt(self.formatException(record.exc_info).splitlines()[-1])
+            trace = self.formatException(record.exc_info).splitlines()
+            line += " exc=" + _fmt(trace[-1])
+            if logging.getLogger().isEnabledFor(logging.DEBUG):
+                # at debug level the whole traceback, indented so a line-based reader keeps it with its event
+                line += "\n" + "\n".join("    " + t for t in trace)
         return line
 
 

@@ -36,6 +36,8 @@ from pathlib import Path
 
 import zenoh
 
+from common.errors import RouterUnreachable
+
 DEFAULT_ROUTER_PORT = 7447
 DEFAULT_CONNECT = f"tcp/127.0.0.1:{DEFAULT_ROUTER_PORT}"
 
@@ -189,7 +191,11 @@ def wait_connected(session: zenoh.Session, timeout: float = 5.0) -> bool:
 def open_session(settings: ZenohSettings | None = None, *, connect_timeout: float = 5.0) -> zenoh.Session:
     """Open a session and wait (briefly) until it is linked to the network it was told to connect to."""
     settings = settings or ZenohSettings.from_env()
-    session = zenoh.open(settings.to_zenoh())
+    try:
+        session = zenoh.open(settings.to_zenoh())
+    except zenoh.ZError as exc:  # zenoh says "Unable to connect ... Timeout!" with a Rust source location
+        endpoints = ", ".join(settings.connect) or "(none)"
+        raise RouterUnreachable(f"no Zenoh router answers at {endpoints}", detail={"zenoh": str(exc)}) from exc
     if settings.connect:
         wait_connected(session, connect_timeout)
     return session

@@ -7,7 +7,11 @@
   view, then dynamic) on the recorded frames, in-process (``services/recording/registration.py``);
   ``--static-profile`` / ``--dynamic-config`` try another method on the same scans.
 
-Both print the comparison with the recorded model and exit 0 when the replay finished and its model is
+- ``objscan replay SESSION_DIR_OR_MCAP --rerun-save FILE.rrd`` (or ``--rerun``, ``--foxglove``) without
+  ``--out``: no re-run; the recorded exchanges and streams go into the live view (``services/live``),
+  exactly as they were seen during the scan.
+
+Both re-runs print the comparison with the recorded model and exit 0 when the replay finished and its model is
 identical or within ``--tolerance-mm`` (1 when it differs, 2 when the replay itself failed). Details in
 ``DIR/replay.json``; docs/recording.md explains what is compared.
 """
@@ -19,7 +23,8 @@ import json
 import sys
 from typing import Any
 
-from common.errors import ObjscanError
+from common.errors import InvalidRequest, ObjscanError
+from services.live import add_live_args, live_requested, open_live_view, replay_recording
 
 
 def register(sub) -> None:  # noqa: ANN001 - argparse sub-parsers
@@ -32,7 +37,7 @@ def register(sub) -> None:  # noqa: ANN001 - argparse sub-parsers
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("source", metavar="SESSION_DIR_OR_MCAP", help="a recorded session folder or its session.mcap")
-    p.add_argument("--out", required=True, help="new session folder for the replay")
+    p.add_argument("--out", help="new session folder for the replay (needed unless only viewing with a live-view flag)")
     p.add_argument("--only", choices=["registration"], help="re-run only this stage, in-process")
     p.add_argument("--static-profile", help="registration only: static profile (default: the recorded one)")
     p.add_argument("--dynamic-config", help="registration only: dynamic config as JSON (default: the recorded one)")
@@ -42,6 +47,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="full replay: largest difference between a live and a recorded camera/arm request "
                         "(m, rad) (default: %(default)s)")
     p.add_argument("--timeout", type=float, default=1800.0, help="full replay: give up after this many seconds")
+    add_live_args(p)
+    p.add_argument("--speed", type=float, default=5.0,
+                   help="--foxglove view: replay at this multiple of the recorded time (default: %(default)s)")
 
 
 def _print_comparison(report: dict[str, Any]) -> int:
@@ -62,7 +70,29 @@ def _print_comparison(report: dict[str, Any]) -> int:
     return 0 if cmp_["within_tolerance"] else 1
 
 
+def _view(args: argparse.Namespace) -> int:
+    """The recording into the live-view sinks, no re-run (Foxglove: serve until Ctrl-C)."""
+    view = open_live_view(args)
+    try:
+        if args.foxglove:  # a WebSocket client sees only what is sent while it is connected: play it in a loop
+            print(f"Foxglove: connect to ws://127.0.0.1:{args.foxglove_port}; replaying at {args.speed}x "
+                  "in a loop (Ctrl-C to stop)")
+            while True:
+                replay_recording(args.source, view, speed=args.speed)
+                view.reset()  # the next loop starts from a fresh scene
+        counts = replay_recording(args.source, view)
+        print("replayed into the live view: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+    finally:
+        view.close()
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.out is None:
+        if not live_requested(args):
+            raise InvalidRequest("give --out DIR (re-run the session) or a live-view flag (--rerun, --rerun-save, "
+                                 "--foxglove) to watch it")
+        return _view(args)
     try:
         if args.only == "registration":
             from services.recording.registration import replay_registration

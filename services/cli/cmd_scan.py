@@ -27,6 +27,8 @@ from common.launcher import ServiceGroup
 from common.messages import Ok, Request
 from common.zenoh_config import DEFAULT_ROUTER_PORT
 from services.cli.cells import SERVICE_MODULES, add_network_args, cell_specs, remote_session, session_name
+from services.cli.outcome import USAGE, one_line, print_json, report_error
+from services.live import add_live_args, live_requested, open_live_view
 
 console = Console()
 
@@ -59,6 +61,9 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--library", help="model library folder the model is added to (default: the orchestrator's)")
     p.add_argument("--robot", default=keys.DEFAULT_ROBOT)
     add_network_args(p)
+    add_live_args(p)
+    p.add_argument("--json", dest="json_output", action="store_true",
+                   help="no progress bar; print one JSON object at the end (status, session, model, accuracy)")
     p.set_defaults(func=run)
 
 
@@ -107,19 +112,19 @@ def arm_args(args) -> dict[str, list[str]]:  # noqa: ANN001
 
 def run(args) -> int:  # noqa: ANN001
     t0 = time.time()
+    console.quiet = bool(args.json_output)  # stdout is the JSON document only
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # unwind: the services this started are stopped
     name = args.resume or args.out or f"sessions/{Path(args.object).stem}-{time.strftime('%Y%m%d-%H%M%S')}"
     if args.connect:  # a remote cell (compose, another machine): its orchestrator owns the sessions folder
         try:
             target = session_name(name)
-        except ValueError as exc:
-            console.print(f"[red]{exc}[/red]")
-            return 2
+        except ValueError as exc:  # a host path or '..': the cell's orchestrator owns the sessions folder
+            print(one_line(f"objscan scan: {exc}"), file=sys.stderr)
+            return USAGE
         try:
             session = remote_session(args.connect, ["orchestrator"])
         except ObjscanError as exc:
-            console.print(f"[red]{exc.message}[/red]")
-            return 1
+            return report_error("scan", exc, as_json=args.json_output)
         try:
             return _acquire(session, args, target, None, t0)
         finally:
@@ -142,6 +147,12 @@ def _acquire(session, args, target: str, session_dir: Path | None, t0: float) ->
             updates.put(msg.info)
 
     sub = session.declare_subscriber(keys.orchestrator(args.robot, "status"), on_status)
+    live = open_live_view(args) if live_requested(args) else None
+    if live is not None:
+        live.subscribe(session, args.robot)
+        for sink in live.sinks:
+            if hasattr(sink, "port"):
+                console.print(f"Foxglove: connect to ws://127.0.0.1:{sink.port}")
     params: dict[str, Any]
     if args.resume:
         params = {"resume": target}
@@ -152,6 +163,8 @@ def _acquire(session, args, target: str, session_dir: Path | None, t0: float) ->
         params["record"] = not args.no_record
         if args.library:
             params["library"] = str(Path(args.library).resolve())
+    if live is not None:
+        params["live"] = True  # the orchestrator publishes each exchange on its tap (services/live/tap.py)
     reply = request_sync(session, keys.orchestrator(args.robot, "run"), Request(params=params), timeout=30)
     console.print(f"session: {reply.info['session']}" + (" (resumed)" if reply.info.get("resumed") else ""))
     stop_sent = False
@@ -164,9 +177,16 @@ def _acquire(session, args, target: str, session_dir: Path | None, t0: float) ->
             request_sync(session, keys.orchestrator(args.robot, "stop"), timeout=10)
 
     signal.signal(signal.SIGINT, on_sigint)
-    final = _follow(updates, args.views if not args.resume else None)
-    sub.undeclare()
+    try:
+        final = _follow(updates, args.views if not args.resume else None)
+    finally:
+        sub.undeclare()
+        if live is not None:
+            time.sleep(0.5)  # the last exchanges (the model) travel just before the final status
+            live.close()
     shown = session_dir if session_dir is not None else Path(str(reply.info["session"]))
+    if args.json_output:
+        return _summary_json(final, shown, time.time() - t0)
     return _summary(final, shown, time.time() - t0, resume_arg=target if session_dir is None else str(shown))
 
 
@@ -187,6 +207,19 @@ def _follow(updates: queue.Queue[dict[str, Any]], views: int | None) -> dict[str
                                         + (f" (attempts {status['attempts']})" if status.get("attempts") else ""))
             if status.get("status") in ("done", "failed", "stopped"):
                 return last
+
+
+def _summary_json(final: dict[str, Any], session_dir: Path, seconds: float) -> int:
+    """The scan's outcome as one JSON object: 0 when done, 1 otherwise (``error`` then holds the last one)."""
+    status = final.get("status")
+    doc = {"status": status, "state": final.get("state"), "session": str(session_dir),
+           "model": final.get("model"), "accuracy": final.get("accuracy"), "views": final.get("views"),
+           "views_done": final.get("views_done"), "seconds": round(seconds, 1),
+           "report": str(session_dir / "report.json")}
+    if status != "done":
+        doc["error"] = final.get("last_error") or {"code": status or "unknown", "message": "scan did not finish"}
+    print_json(doc)
+    return 0 if status == "done" else 1
 
 
 def _summary(final: dict[str, Any], session_dir: Path, seconds: float, resume_arg: str | None = None) -> int:

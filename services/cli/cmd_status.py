@@ -1,41 +1,75 @@
-"""``objscan status``: the live services (liveliness) and what their health queries say."""
+"""``objscan status``: the live services (liveliness) and what their health queries say.
+
+``--json`` prints one object, ``{"services": [{service, instance, status, busy, uptime_s, info}, ...]}``.
+No router: exit 3 with one line (``no_router``); a router but no live service: exit 4 (``no_services``).
+"""
 
 from __future__ import annotations
+
+import os
+from dataclasses import replace
+from typing import Any
 
 from rich.console import Console
 from rich.table import Table
 
 from common import keys
 from common.client import live_services, request_sync
-from common.errors import ObjscanError
+from common.errors import ObjscanError, ServiceUnavailable
 from common.messages import Health
 from common.zenoh_config import open_session
 from services.cli.cells import add_network_args, network_settings
+from services.cli.outcome import print_json
 
 
 def register(sub) -> None:  # noqa: ANN001
     p = sub.add_parser("status", help="list live services and their health")
     add_network_args(p)
     p.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for answers")
+    p.add_argument("--json", dest="json_output", action="store_true", help="print one JSON object, no table")
     p.set_defaults(func=run)
 
 
+def collect(session: Any, timeout: float) -> list[dict[str, Any]]:
+    """One row per live service instance: its health, or the error its health query gave."""
+    rows = []
+    for service, instance in live_services(session, timeout=timeout):
+        row: dict[str, Any] = {"service": service, "instance": instance}
+        try:
+            h = request_sync(session, keys.health(service, instance), timeout=timeout)
+            if not isinstance(h, Health):
+                raise ObjscanError(f"health answered with {type(h).__name__}", code="bad_message")
+            row.update(status=h.status, busy=h.busy, uptime_s=round(float(h.uptime_s), 1), info=h.info)
+        except ObjscanError as exc:
+            row.update(status=exc.code, busy=None, uptime_s=None, info={"error": exc.message})
+        rows.append(row)
+    return rows
+
+
+STATUS_CONNECT_TIMEOUT_MS = 4000  # a router on the LAN answers in milliseconds; say "no router" within ~15 s
+
+
 def run(args) -> int:  # noqa: ANN001
-    session = open_session(network_settings(args.connect))
+    settings = network_settings(args.connect)
+    if "OBJSCAN_ZENOH_CONNECT_TIMEOUT_MS" not in os.environ:
+        settings = replace(settings, connect_timeout_ms=STATUS_CONNECT_TIMEOUT_MS)
+    session = open_session(settings)
     try:
-        table = Table(title="objscan services")
-        for col in ("service", "instance", "status", "busy", "uptime", "info"):
-            table.add_column(col)
-        live = live_services(session, timeout=args.timeout)
-        for service, instance in live:
-            try:
-                h = request_sync(session, keys.health(service, instance), timeout=args.timeout)
-                assert isinstance(h, Health)
-                info = ", ".join(f"{k}={v}" for k, v in h.info.items() if not isinstance(v, dict))
-                table.add_row(service, instance, h.status, str(h.busy), f"{h.uptime_s:.0f}s", info[:80])
-            except ObjscanError as exc:
-                table.add_row(service, instance, f"[red]{exc.code}[/red]", "-", "-", exc.message[:80])
-        Console().print(table if live else "no live services found (is 'objscan up' running?)")
+        rows = collect(session, args.timeout)
     finally:
         session.close()
+    if not rows:
+        raise ServiceUnavailable("no live services found (is 'objscan up' running?)", code="no_services")
+    if args.json_output:
+        print_json({"services": rows})
+        return 0
+    table = Table(title="objscan services")
+    for col in ("service", "instance", "status", "busy", "uptime", "info"):
+        table.add_column(col)
+    for r in rows:
+        ok = r["uptime_s"] is not None
+        info = ", ".join(f"{k}={v}" for k, v in r["info"].items() if not isinstance(v, dict))
+        table.add_row(r["service"], r["instance"], r["status"] if ok else f"[red]{r['status']}[/red]",
+                      str(r["busy"]) if ok else "-", f"{r['uptime_s']:.0f}s" if ok else "-", info[:80])
+    Console().print(table)
     return 0

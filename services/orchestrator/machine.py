@@ -134,7 +134,8 @@ class Acquisition:
                 "status": self.j["status"], "attempts": self.j["counters"]["grasp_attempts"],
                 "rescans": self.j["counters"]["rescans"], "last_error": self.j.get("error"),
                 "session": str(self.store.path), "elapsed_s": round(time.time() - self.j["started"], 1),
-                "model": self.j.get("model_path"), "accuracy": self.j.get("accuracy")}
+                "model": self.j.get("model_path"), "accuracy": self.j.get("accuracy"),
+                "turns_deg": list(self.j["turns_deg"])}  # cumulative commanded turn per view (the live view)
 
     def _persist(self) -> None:
         self.store.save_journal(self.j)

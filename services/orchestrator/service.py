@@ -69,7 +69,7 @@ class OrchestratorService(Service):
         # session recording (docs/recording.md): on unless the run says ``record: false``
         self.current, run = recorded_acquisition(
             lambda cell: Acquisition(cell, store, config, on_status=self._publish, library=library), self.request, path,
-            self.session, self.robot, enabled=params.get("record", True))
+            self.session, self.robot, enabled=params.get("record", True), live=bool(params.get("live", False)))
         self.task = self.spawn(run)
         return Ok(info={"session": str(path.resolve()), "resumed": self.current.resumed})
 

@@ -60,8 +60,17 @@ async def run_recorded(acquisition: Any, recorder: SessionRecorder | None) -> di
 
 def recorded_acquisition(make_acquisition: Callable[[Cell], Any], send: Any, session_dir: str | Path,
                          zenoh_session: Any, robot: str, *, enabled: bool = True,
-                         config: RecorderConfig | None = None) -> tuple[Any, Coroutine[Any, Any, dict[str, Any]]]:
-    """(acquisition, coroutine that runs it and closes its recording): the acquisition's Cell records."""
+                         config: RecorderConfig | None = None,
+                         live: bool = False) -> tuple[Any, Coroutine[Any, Any, dict[str, Any]]]:
+    """(acquisition, coroutine that runs it and closes its recording): the acquisition's Cell records.
+
+    ``live``: every exchange is also published on the orchestrator's tap key for a live view
+    (``services/live/tap.py``), recorded or not.
+    """
+    if live and zenoh_session is not None:
+        from services.live.tap import tapped
+
+        send = tapped(send, zenoh_session, robot)
     recorder = start_recording(session_dir, zenoh_session, robot, config) if enabled else None
     try:
         acquisition = make_acquisition(Cell(recorder.wrap(send) if recorder else send, robot))

@@ -39,6 +39,7 @@ from common.codec import Message, decode, registered_types
 from common.errors import ObjscanError, RemoteError, ServiceUnavailable
 from common.log import event
 from common.messages import Error, JointState
+from common.version import objscan_version
 from services.recording import visual
 from services.recording.errors import RecordingError
 
@@ -77,15 +78,6 @@ def recording_path(session_dir: str | Path) -> Path:
         return d / RECORDING_NAME
     last = max([int(m.group(1)) for p in existing if (m := _PART.match(p.name))] or [0])
     return d / f"session.part{last + 1}.mcap"
-
-
-def objscan_version() -> str:
-    try:
-        from importlib.metadata import version
-
-        return version("objscan")
-    except Exception:  # not installed as a distribution (plain checkout)
-        return "unknown"
 
 
 def schema_versions() -> dict[str, int]:

@@ -42,7 +42,7 @@ def schema(name: str) -> tuple[str, bytes]:
     return s.encoding, bytes(s.data)
 
 
-def _ts(t: float) -> Any:
+def stamp(t: float) -> Any:
     return fm.Timestamp.from_epoch_secs(float(t))
 
 
@@ -53,22 +53,22 @@ def _vq(T: np.ndarray) -> tuple[Any, Any]:
             fm.Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])))
 
 
-def _pose(T: np.ndarray) -> Any:
+def pose_msg(T: np.ndarray) -> Any:
     v, q = _vq(T)
     return fm.Pose(position=v, orientation=q)
 
 
-def _transform(t: float, parent: str, child: str, T: np.ndarray) -> Any:
+def frame_transform(t: float, parent: str, child: str, T: np.ndarray) -> Any:
     v, q = _vq(T)
-    return fm.FrameTransform(timestamp=_ts(t), parent_frame_id=parent, child_frame_id=child,
+    return fm.FrameTransform(timestamp=stamp(t), parent_frame_id=parent, child_frame_id=child,
                              translation=v, rotation=q)
 
 
 def frame_transforms(t: float, T_base_gripper: np.ndarray, T_base_camera: np.ndarray) -> list[Visual]:
     """The tree base → gripper → camera (the camera hangs off the gripper, as it is mounted)."""
     T_gripper_camera = invert(np.asarray(T_base_gripper, float)) @ np.asarray(T_base_camera, float)
-    msg = fm.FrameTransforms(transforms=[_transform(t, BASE, GRIPPER, T_base_gripper),
-                                         _transform(t, GRIPPER, CAMERA, T_gripper_camera)])
+    msg = fm.FrameTransforms(transforms=[frame_transform(t, BASE, GRIPPER, T_base_gripper),
+                                         frame_transform(t, GRIPPER, CAMERA, T_gripper_camera)])
     return [("/tf", "foxglove.FrameTransforms", msg.encode())]
 
 
@@ -87,7 +87,7 @@ def point_cloud(t: float, cloud: PointCloud, frame_id: str = BASE) -> bytes:
     fields = [fm.PackedElementField(name=n_, offset=4 * i, type=F) for i, n_ in enumerate("xyz")]
     fields += [fm.PackedElementField(name=n_, offset=12 + i, type=U) for i, n_ in
                enumerate(("red", "green", "blue", "alpha"))]
-    msg = fm.PointCloud(timestamp=_ts(t), frame_id=frame_id, pose=_pose(np.eye(4)), point_stride=16,
+    msg = fm.PointCloud(timestamp=stamp(t), frame_id=frame_id, pose=pose_msg(np.eye(4)), point_stride=16,
                         fields=fields, data=rec.tobytes())
     return msg.encode()
 
@@ -99,11 +99,11 @@ def rgbd(t: float, frame: RGBDFrame) -> list[Visual]:
     h, w = frame.depth.shape
     buf = io.BytesIO()
     Image.fromarray(np.ascontiguousarray(frame.color)).save(buf, format="JPEG", quality=JPEG_QUALITY)
-    color = fm.CompressedImage(timestamp=_ts(t), frame_id=CAMERA, data=buf.getvalue(), format="jpeg")
-    depth = fm.RawImage(timestamp=_ts(t), frame_id=CAMERA, width=w, height=h, encoding="16UC1", step=2 * w,
+    color = fm.CompressedImage(timestamp=stamp(t), frame_id=CAMERA, data=buf.getvalue(), format="jpeg")
+    depth = fm.RawImage(timestamp=stamp(t), frame_id=CAMERA, width=w, height=h, encoding="16UC1", step=2 * w,
                         data=np.ascontiguousarray(frame.depth, dtype="<u2").tobytes())
     i = frame.intrinsics
-    calib = fm.CameraCalibration(timestamp=_ts(t), frame_id=CAMERA, width=i.width, height=i.height,
+    calib = fm.CameraCalibration(timestamp=stamp(t), frame_id=CAMERA, width=i.width, height=i.height,
                                  distortion_model="plumb_bob", D=[0.0] * 5,
                                  K=[i.fx, 0.0, i.cx, 0.0, i.fy, i.cy, 0.0, 0.0, 1.0],
                                  R=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0],
@@ -112,7 +112,7 @@ def rgbd(t: float, frame: RGBDFrame) -> list[Visual]:
            ("/camera/depth", "foxglove.RawImage", depth.encode()),
            ("/camera/calibration", "foxglove.CameraCalibration", calib.encode())]
     if frame.T_base_camera is not None:
-        pose = fm.PoseInFrame(timestamp=_ts(t), frame_id=BASE, pose=_pose(frame.T_base_camera))
+        pose = fm.PoseInFrame(timestamp=stamp(t), frame_id=BASE, pose=pose_msg(frame.T_base_camera))
         out.append(("/camera/capture_pose", "foxglove.PoseInFrame", pose.encode()))
     return out
 
@@ -123,7 +123,7 @@ def for_exchange(t: float, key: str, request: Any, reply: Any) -> list[Visual]:
     if isinstance(request, MoveRequest) and request.target is not None and not request.dry_run:
         frame = "/arm/target_camera" if request.frame == CAMERA else "/arm/target_gripper"
         out.append((frame, "foxglove.PoseInFrame",
-                    fm.PoseInFrame(timestamp=_ts(t), frame_id=BASE, pose=_pose(request.target)).encode()))
+                    fm.PoseInFrame(timestamp=stamp(t), frame_id=BASE, pose=pose_msg(request.target)).encode()))
     if isinstance(reply, MoveResult) and not (isinstance(request, MoveRequest) and request.dry_run):
         out += frame_transforms(t, reply.T_base_gripper, reply.T_base_camera)
     elif isinstance(reply, RGBDFrame):
@@ -132,10 +132,10 @@ def for_exchange(t: float, key: str, request: Any, reply: Any) -> list[Visual]:
         topic = "/locate/object" if reply.view < 0 else f"/views/{reply.view:02d}/object"
         out.append((topic, "foxglove.PointCloud", point_cloud(t, reply.cloud)))
     elif isinstance(reply, GraspPlanReply) and reply.grasps:
-        poses = [_pose(g.poses["grasp"].matrix()) for g in reply.grasps if "grasp" in g.poses]
+        poses = [pose_msg(g.poses["grasp"].matrix()) for g in reply.grasps if "grasp" in g.poses]
         if poses:
             out.append(("/grasps", "foxglove.PosesInFrame",
-                        fm.PosesInFrame(timestamp=_ts(t), frame_id=BASE, poses=poses).encode()))
+                        fm.PosesInFrame(timestamp=stamp(t), frame_id=BASE, poses=poses).encode()))
     elif isinstance(reply, ModelResult):
         out.append(("/model", "foxglove.PointCloud", point_cloud(t, reply.cloud)))
     return out
@@ -150,5 +150,5 @@ def for_sample(t: float, msg: Any) -> list[Visual]:
         out += frame_transforms(t, msg.T_base_gripper, msg.T_base_camera)
     joints = [fm.JointState(name=n, position=float(p)) for n, p in zip(msg.names, msg.position, strict=False)]
     joints.append(fm.JointState(name="gripper_opening", position=float(msg.gripper_opening)))
-    out.append(("/arm/joints", "foxglove.JointStates", fm.JointStates(timestamp=_ts(t), joints=joints).encode()))
+    out.append(("/arm/joints", "foxglove.JointStates", fm.JointStates(timestamp=stamp(t), joints=joints).encode()))
     return out

@@ -1,7 +1,8 @@
 """``build_report``: one self-contained HTML page about an acquisition (images inlined as base64 PNG).
 
 Sections: summary; accuracy against ground truth with a per-point error map (simulated sessions); the model
-from several angles; the registration graph with per-edge fitness; per view the color images, the isolated
+in an interactive viewer (``viewer.py``: turn and zoom, coloured by its error where ground truth is known)
+and from several angles; the registration graph with per-edge fitness; per view the color images, the isolated
 object rendered from the first scan's camera with the chosen grasp's contacts drawn on it, and the grasp
 plans; timings per step; the decision log. Everything renders on the CPU (``raster.py``), so it works on a
 headless machine. Missing parts (a failed run) are reported as missing, not as an error.
@@ -23,6 +24,9 @@ from services.report.errors import ReportError
 from services.report.graph import registration_graph_svg, timings_svg
 from services.report.raster import Camera, colormap, orbit_camera, png_data_uri, render_points
 from services.report.session_data import SessionData, ViewData, ground_truth_points, load_session
+from services.report.viewer import CSS as VIEWER_CSS
+from services.report.viewer import MAX_POINTS as VIEWER_POINTS
+from services.report.viewer import viewer_html
 
 
 @dataclass(frozen=True)
@@ -59,13 +63,15 @@ def render_html(session: SessionData, cfg: ReportConfig = ReportConfig()) -> str
     """The page as a string (see the module doc for its sections)."""
     t0 = time.perf_counter()
     rng = np.random.default_rng(cfg.seed)
-    sections = [_summary(session), _accuracy(session, cfg, rng), _model(session, cfg, rng), _graph(session),
+    errors = _model_errors(session, cfg, rng)
+    sections = [_summary(session), _accuracy(session, cfg, errors), _model(session, cfg, rng, errors), _graph(session),
                 _views(session, cfg), _timings(session), _decisions(session)]
     title = f"objscan report: {session.object_name}"
     footer = (f"Generated {time.strftime('%Y-%m-%d %H:%M:%S')} from {html.escape(str(session.path))} "
               f"in {time.perf_counter() - t0:.1f} s.")
     return (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{html.escape(title)}</title>"
-            f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><style>{_CSS}</style></head>"
+            f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
+            f"<style>{_CSS}{VIEWER_CSS}</style></head>"
             f"<body><h1>{html.escape(title)}</h1>{''.join(sections)}<footer>{footer}</footer></body></html>\n")
 
 
@@ -86,13 +92,24 @@ def _summary(s: SessionData) -> str:
     return "<section><h2>Summary</h2>" + _kv_table(rows) + "</section>"
 
 
-def _accuracy(s: SessionData, cfg: ReportConfig, rng: np.random.Generator) -> str:
-    head = "<section><h2>Accuracy against ground truth</h2>"
+@dataclass
+class ModelErrors:
+    """The model aligned to ground truth and each point's distance to the true surface (computed once per page)."""
+
+    aligned: np.ndarray  # (N, 3) model points in the ground truth's frame
+    rgb: np.ndarray | None
+    normals: np.ndarray | None
+    err_mm: np.ndarray
+    accuracy: dict[str, Any]
+
+
+def _model_errors(s: SessionData, cfg: ReportConfig, rng: np.random.Generator) -> ModelErrors | None:
+    """None when there is no model or no ground truth (not a simulated session)."""
     if s.model is None:
-        return head + "<p class='missing'>No model: nothing to measure.</p></section>"
+        return None
     gt = ground_truth_points(s, cfg.gt_points) if s.simulated else None
     if gt is None:
-        return head + "<p class='missing'>Ground truth unknown (not a simulated session).</p></section>"
+        return None
     from services.registration.evaluation import chamfer_metrics, point_errors
 
     acc = dict(s.accuracy or {})
@@ -102,10 +119,19 @@ def _accuracy(s: SessionData, cfg: ReportConfig, rng: np.random.Generator) -> st
     if "chamfer_mm" not in acc:
         acc.update(chamfer_metrics(aligned, gt))
         acc["aligned"] = False
-    err_mm = 1000.0 * point_errors(aligned, gt)
+    return ModelErrors(aligned, rgb, None if nrm is None else nrm @ T[:3, :3].T,
+                       1000.0 * point_errors(aligned, gt), acc)
+
+
+def _accuracy(s: SessionData, cfg: ReportConfig, errors: ModelErrors | None) -> str:
+    head = "<section><h2>Accuracy against ground truth</h2>"
+    if s.model is None:
+        return head + "<p class='missing'>No model: nothing to measure.</p></section>"
+    if errors is None:
+        return head + "<p class='missing'>Ground truth unknown (not a simulated session).</p></section>"
+    acc, err_mm, aligned = errors.accuracy, errors.err_mm, errors.aligned
     colors = colormap(err_mm, 0.0, cfg.error_vmax_mm)
-    nrm_aligned = None if nrm is None else nrm @ T[:3, :3].T
-    images = "".join(_figure(render_points(aligned, colors, cam, normals=nrm_aligned, radius_px=1),
+    images = "".join(_figure(render_points(aligned, colors, cam, normals=errors.normals, radius_px=1),
                              f"azimuth {az:.0f}°, elevation {el:.0f}°")
                      for az, el, cam in _orbit(aligned, cfg.error_angles_deg, cfg))
     rows = [("chamfer", _mm(acc.get("chamfer_mm"))), ("accuracy (model → GT)", _mm(acc.get("accuracy_mm"))),
@@ -114,13 +140,16 @@ def _accuracy(s: SessionData, cfg: ReportConfig, rng: np.random.Generator) -> st
             ("per-point error: median / 95th pct / max",
              f"{np.median(err_mm):.2f} / {np.percentile(err_mm, 95):.2f} / {err_mm.max():.2f} mm"),
             ("aligned to GT before measuring", "yes" if acc.get("aligned", True) else "no")]
-    bar = (f"<div class='colorbar'><span>0 mm</span><div class='grad'></div>"
-           f"<span>≥ {cfg.error_vmax_mm:g} mm</span></div>")
-    return (head + _kv_table(rows) + "<p>Distance of every model point to the true surface:</p>" + bar
+    return (head + _kv_table(rows) + "<p>Distance of every model point to the true surface:</p>" + _colorbar(cfg)
             + f"<div class='row'>{images}</div></section>")
 
 
-def _model(s: SessionData, cfg: ReportConfig, rng: np.random.Generator) -> str:
+def _colorbar(cfg: ReportConfig) -> str:
+    return (f"<div class='colorbar'><span>0 mm</span><div class='grad'></div>"
+            f"<span>≥ {cfg.error_vmax_mm:g} mm</span></div>")
+
+
+def _model(s: SessionData, cfg: ReportConfig, rng: np.random.Generator, errors: ModelErrors | None) -> str:
     head = "<section><h2>Model</h2>"
     if s.model is None:
         return head + "<p class='missing'>No model.ply in the session (the run did not reach the model step).</p>" \
@@ -129,7 +158,16 @@ def _model(s: SessionData, cfg: ReportConfig, rng: np.random.Generator) -> str:
     images = "".join(_figure(render_points(xyz, rgb, cam, normals=nrm, radius_px=1),
                              f"azimuth {az:.0f}°, elevation {el:.0f}°")
                      for az, el, cam in _orbit(xyz, cfg.model_angles_deg, cfg))
-    return head + f"<p>{len(s.model)} points, rendered on the CPU.</p><div class='row'>{images}</div></section>"
+    if errors is not None:  # in the ground truth's frame, coloured either way
+        interactive = viewer_html(errors.aligned, errors.rgb, colormap(errors.err_mm, 0.0, cfg.error_vmax_mm),
+                                  caption="drag to turn, wheel to zoom; error colours as above", seed=cfg.seed)
+        note = _colorbar(cfg)
+    else:
+        interactive = viewer_html(xyz, rgb, caption="drag to turn, wheel to zoom", seed=cfg.seed)
+        note = ""
+    return (head + f"<p>{len(s.model)} points. Turn and zoom it here (up to {VIEWER_POINTS} points, drawn by"
+            f" the page itself, offline):</p>{note}{interactive}<p>Rendered on the CPU:</p>"
+            f"<div class='row'>{images}</div></section>")
 
 
 def _graph(s: SessionData) -> str:
