@@ -52,15 +52,15 @@ def test_scan_connect_without_a_cell_says_what_is_missing(service_group):
     proc = subprocess.run([sys.executable, "-m", "services.cli", "scan", "--connect", service_group.endpoint,
                            "--out", "x"], capture_output=True, text=True, timeout=60,
                           env={"PATH": "/usr/bin:/bin", "COLUMNS": "200", "OMP_NUM_THREADS": "1"})
-    assert proc.returncode == 1
-    assert "no orchestrator service" in proc.stdout, proc.stdout + proc.stderr
+    assert proc.returncode == 4  # joined, but no service answered (services/cli/outcome.py)
+    assert "no orchestrator service" in proc.stderr, proc.stdout + proc.stderr
 
 
 def test_scan_connect_refuses_a_client_path(service_group):
     proc = subprocess.run([sys.executable, "-m", "services.cli", "scan", "--connect", service_group.endpoint,
                            "--out", "/home/me/x"], capture_output=True, text=True, timeout=60,
                           env={"PATH": "/usr/bin:/bin", "COLUMNS": "200", "OMP_NUM_THREADS": "1"})
-    assert proc.returncode == 2 and "relative to the cell's sessions root" in proc.stdout
+    assert proc.returncode == 2 and "relative to the cell's sessions root" in proc.stderr, proc.stdout + proc.stderr
 
 
 def test_up_connect_joins_a_running_router(service_group, tmp_path):
@@ -94,4 +94,5 @@ def test_a_missing_tls_file_is_a_clear_error(tmp_path):
            "OBJSCAN_ZENOH_TLS_CA": str(tmp_path / "nope" / "ca.pem")}
     proc = subprocess.run([sys.executable, "-m", "services.cli", "scan", "--connect", "tls/127.0.0.1:9", "--out",
                            "x"], capture_output=True, text=True, timeout=60, env=env)
-    assert proc.returncode == 1 and "ca.pem does not exist" in proc.stdout, proc.stdout + proc.stderr
+    assert proc.returncode == 1 and "ca.pem does not exist" in proc.stderr, proc.stdout + proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1  # one line, no traceback
