@@ -23,7 +23,7 @@ from common.api import GripperRequest, GripperResult, MoveRequest, MoveResult, S
 from common.codec import Message
 from common.errors import InvalidRequest
 from common.messages import JointState, Ok, Request
-from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from common.runtime import COMMAND_BUDGET, QueryContext, Service, run_service, service_arg_parser, settings_from_args
 from services.arm.arm import ArmConfig, ArmController
 from services.arm.kinematics import Kinematics
 
@@ -42,11 +42,12 @@ class ArmService(Service):
         self.arm = ArmController(driver, config, kinematics=kin)
         await self.run_cpu(self.arm.connect)
         r = self.robot
-        self.queryable(keys.arm(r, "move"), self.move)
-        self.queryable(keys.arm(r, "gripper"), self.gripper)
-        self.queryable(keys.arm(r, "stop"), self.stop_motion)
-        self.queryable(keys.arm(r, "scene"), self.scene)
-        self.queryable(keys.arm(r, "state"), self.state)
+        # commands are small: a hostile megabyte is refused unread; stop is never queued behind anything
+        self.queryable(keys.arm(r, "move"), self.move, budget=COMMAND_BUDGET)
+        self.queryable(keys.arm(r, "gripper"), self.gripper, budget=COMMAND_BUDGET)
+        self.queryable(keys.arm(r, "stop"), self.stop_motion, budget=COMMAND_BUDGET, priority=True)
+        self.queryable(keys.arm(r, "scene"), self.scene, budget=COMMAND_BUDGET)
+        self.queryable(keys.arm(r, "state"), self.state, budget=COMMAND_BUDGET)
         self.state_pub = self.publisher(keys.arm(r, "state"), block=False)
         self.spawn(self._stream_state())
 

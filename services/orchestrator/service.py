@@ -17,7 +17,7 @@ from common import keys
 from common.codec import Message
 from common.errors import InvalidRequest, ObjscanError
 from common.messages import Ok, Request
-from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from common.runtime import COMMAND_BUDGET, QueryContext, Service, run_service, service_arg_parser, settings_from_args
 from services.orchestrator.cell import Cell
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.machine import Acquisition
@@ -36,9 +36,9 @@ class OrchestratorService(Service):
         self.last_status: dict[str, Any] = {"state": "idle", "status": "idle"}
         r = self.robot
         self.status_pub = self.publisher(keys.orchestrator(r, "status"))
-        self.queryable(keys.orchestrator(r, "run"), self.run_acquisition)
-        self.queryable(keys.orchestrator(r, "status"), self.status)
-        self.queryable(keys.orchestrator(r, "stop"), self.stop_acquisition)
+        self.queryable(keys.orchestrator(r, "run"), self.run_acquisition, budget=COMMAND_BUDGET)
+        self.queryable(keys.orchestrator(r, "status"), self.status, budget=COMMAND_BUDGET)
+        self.queryable(keys.orchestrator(r, "stop"), self.stop_acquisition, budget=COMMAND_BUDGET, priority=True)
 
     def _publish(self, status: dict[str, Any]) -> None:
         self.last_status = status
