@@ -237,14 +237,15 @@ def transform_cloud(cloud: PointCloud, T: np.ndarray, frame: str | None = None) 
 
 def write_ply(path: Path | str, cloud: PointCloud | o3d.geometry.PointCloud, *, binary: bool = True) -> Path:
     """Write xyz (+ rgb, + normals when present) to a PLY file; parent folders are created."""
+    from common.atomic import atomic_path
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     pcd = cloud if isinstance(cloud, o3d.geometry.PointCloud) else to_o3d(cloud)
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    if not o3d.io.write_point_cloud(str(tmp), pcd, write_ascii=not binary):
-        tmp.unlink(missing_ok=True)
-        raise CloudError(f"could not write {path}", code="io_error")
-    tmp.replace(path)  # a reader never sees a half-written file
+    # unique temporary name, fsync, rename, folder fsync: a reader never sees a half-written file, two
+    # writers never share a temporary file, and a failed write (disk full) raises instead of renaming
+    with atomic_path(path) as tmp:
+        if not o3d.io.write_point_cloud(str(tmp), pcd, write_ascii=not binary) or tmp.stat().st_size == 0:
+            raise CloudError(f"could not write {path}", code="io_error")
     return path
 
 
