@@ -105,17 +105,23 @@ def hostile_main(endpoint: str, robot: str, out: Path, stop_file: Path) -> None:
             payload = payload_fn()
             with lock:
                 sent[kind] += 1
-            replies = list(session.get(key, payload=payload, timeout=5.0))
+            try:
+                replies = list(session.get(key, payload=payload, timeout=5.0))
+            except Exception:  # the session closing at the end
+                return
             record(kind, _reply_code(replies[0]) if replies else "no_reply")
 
     def flood() -> None:
         while not stop_file.exists():
-            receivers = [session.get(keys.arm(robot, "state"), timeout=5.0) for _ in range(64)]
-            with lock:
-                sent["flood"] += len(receivers)
-            for r in receivers:
-                replies = list(r)
-                record("flood", _reply_code(replies[0]) if replies else "no_reply")
+            try:
+                receivers = [session.get(keys.arm(robot, "state"), timeout=5.0) for _ in range(64)]
+                with lock:
+                    sent["flood"] += len(receivers)
+                for r in receivers:
+                    replies = list(r)
+                    record("flood", _reply_code(replies[0]) if replies else "no_reply")
+            except Exception:  # the session closing at the end
+                return
             time.sleep(0.05)
 
     rng = np.random.default_rng(17)

@@ -158,8 +158,12 @@ class Acquisition:
         after_estop = self.state == State.STOPPED
         if after_estop:  # resuming after an e-stop
             self.j["state"] = self.j.get("stopped_in", State.SCAN.value)
-        if self.state in (State.FAILED, State.DONE):
+        if self.state == State.DONE:  # nothing to do, but say so: a follower waits for a final status
+            self.decide("resume of a finished session: nothing to do")
+            self._persist()
             return self.status()
+        if self.state == State.FAILED:  # the summary says "resume with ...": retry where it failed
+            self._retry_after_failure()
         self.j["status"] = "running"
         self._persist()
         try:
@@ -186,6 +190,18 @@ class Acquisition:
             await self._fail("internal", f"{type(exc).__name__}: {exc}")
         self._persist()
         return self.status()
+
+    def _retry_after_failure(self) -> None:
+        """Resume a failed session from the state it failed in, with a fresh re-scan budget for that view
+        (the arm was parked, gripper open, when it failed: nothing is held)."""
+        err = self.j.get("error") or {}
+        state = err.get("state") if err.get("state") in {s.value for s in State} - {s.value for s in TERMINAL} \
+            else State.SCAN.value
+        self.j["state"] = state
+        self.j["rescans"].pop(str(self.view), None)
+        self.j.setdefault("previous_errors", []).append(err)
+        self.j["error"] = None
+        self.decide("resumed after failure", state=state, previous=err.get("code"))
 
     async def _fail(self, code: str, message: str) -> None:
         """End the session ``failed`` with the reason in the journal, and park the arm."""

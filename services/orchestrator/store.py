@@ -7,12 +7,19 @@ keeps:
   with its timing, rewritten atomically after each step: a killed orchestrator resumes from it;
 - ``view_KK/view.json`` + ``view_KK/object.ply``: the registered view (static result);
 - ``view_KK/grasps.json``: the plan and what was tried;
-- ``model.ply`` and ``report.json`` at the end.
+- ``model.ply`` and ``report.json`` at the end;
+- ``.session.lock``: held (``fcntl.flock``) by the one orchestrator working on the session (issue 17 #8).
+
+``SessionStore.create`` makes a new session only in an absent or empty folder, ``SessionStore.open``
+only opens a folder that holds a journal: a session never adopts (and a re-scan never moves things in) a
+folder it did not create.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
+import os
 import time
 from pathlib import Path
 from typing import Any
@@ -20,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from common.api import ViewResult
+from common.errors import ObjscanError
 from common.messages import Plane, PointCloud, RGBDFrame
 from common.session_folder import (
     atomic_write_json,
@@ -32,14 +40,74 @@ from common.session_folder import (
 from services.registration.cloud import read_ply, write_ply
 
 JOURNAL = "journal.json"
+LOCK = ".session.lock"
+
+
+class SessionLocked(ObjscanError):
+    """Another orchestrator (process) is working on this session folder."""
+
+    code = "session_locked"
+
+
+class NotASession(ObjscanError):
+    """The folder is not one this store may use (not empty for a new session, no journal to resume)."""
+
+    code = "not_a_session"
 
 
 class SessionStore:
-    """Reads and writes one acquisition's folder; all writes are atomic (temp file + rename)."""
+    """Reads and writes one acquisition's folder; all writes are atomic (``common.atomic``)."""
 
     def __init__(self, path: Path):
         self.path = Path(path)
         self.path.mkdir(parents=True, exist_ok=True)
+        self._lock_fd: int | None = None
+
+    @classmethod
+    def create(cls, path: Path) -> SessionStore:
+        """A new session in ``path``, which must be absent or an empty folder (checked before creating it)."""
+        path = Path(path)
+        if path.exists() and (not path.is_dir() or any(path.iterdir())):
+            what = "already holds a session; resume it or choose another folder" if (path / JOURNAL).is_file() \
+                else "is not an empty folder"
+            raise NotASession(f"{path} {what}", detail={"path": str(path)})
+        return cls(path)
+
+    @classmethod
+    def open(cls, path: Path) -> SessionStore:
+        """An existing session (``path`` holds ``journal.json``), to resume it."""
+        path = Path(path)
+        if not (path / JOURNAL).is_file():
+            raise NotASession(f"{path} has no {JOURNAL} to resume from", detail={"path": str(path)})
+        return cls(path)
+
+    # ----------------------------------------------------------------------------------- lock
+    def acquire_lock(self) -> SessionStore:
+        """Take the session's lock for this process, or raise ``SessionLocked`` at once (never waits).
+
+        ``flock`` locks belong to the open file: they exclude other processes *and* another store of the
+        same folder in this process, and the kernel drops them when the holder dies (a killed orchestrator
+        never leaves a stale lock).
+        """
+        if self._lock_fd is not None:
+            return self
+        fd = os.open(self.path / LOCK, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise SessionLocked(f"another orchestrator is working on {self.path}",
+                                detail={"path": str(self.path)}) from None
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        self._lock_fd = fd
+        return self
+
+    def release_lock(self) -> None:
+        if self._lock_fd is not None:
+            fd, self._lock_fd = self._lock_fd, None
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
 
     # ----------------------------------------------------------------------------------- journal
     def load_journal(self) -> dict[str, Any] | None:
