@@ -206,9 +206,11 @@ def run(quick: bool = False) -> dict[str, Any]:
         time.sleep(3.0)  # the hostile senders are connected and sending
         loaded = time_stops(s, ROBOT, n)
         load = hostile.stop()
-        request_sync(s, keys.arm(ROBOT, "stop"), Ok(), timeout=10)
         alive = group.procs["arm"].poll() is None
-        health = request_sync(s, keys.health("arm", "*"), timeout=10) if alive else None
+        try:  # the arm still answers its health query once the load is gone
+            health = request_sync(s, keys.health("arm", "*"), timeout=30) if alive else None
+        except Exception:
+            health = None
     answered = sum(1 for v in loaded if v < 30_000)
     return {
         "estop_ms_p50": _pct(loaded, 50), "estop_ms_p99": _pct(loaded, 99), "estop_ms_max": _pct(loaded, 100),

@@ -61,10 +61,10 @@ def test_a_session_folder_has_one_orchestrator(tmp_path):
     with pytest.raises(SessionLocked) as err:
         SessionStore(tmp_path).acquire_lock()
     assert err.value.code == "session_locked"
-    # another process too
-    probe = ("import sys; from services.orchestrator.store import SessionStore, SessionLocked\n"
-             "try:\n    SessionStore(sys.argv[1]).acquire_lock(); print('got')\n"
-             "except SessionLocked:\n    print('locked')")
+    # another process taking the same lock file (plain flock: the process need not import objscan)
+    probe = ("import fcntl, os, sys\nfd = os.open(os.path.join(sys.argv[1], '.session.lock'), os.O_RDWR)\n"
+             "try:\n    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB); print('got')\n"
+             "except BlockingIOError:\n    print('locked')")
     out = subprocess.run([sys.executable, "-c", probe, str(tmp_path)], capture_output=True, text=True, timeout=60)
     assert out.stdout.strip() == "locked", out.stderr
     first.release_lock()
@@ -73,9 +73,10 @@ def test_a_session_folder_has_one_orchestrator(tmp_path):
 
 
 def test_a_killed_holder_leaves_no_stale_lock(tmp_path):
-    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from services.orchestrator.store import "
-                               "SessionStore; SessionStore(sys.argv[1]).acquire_lock(); print('held', flush=True); "
-                               "time.sleep(60)", str(tmp_path)], stdout=subprocess.PIPE, text=True)
+    holder = subprocess.Popen([sys.executable, "-c", "import fcntl, os, sys, time\n"
+                               "fd = os.open(os.path.join(sys.argv[1], '.session.lock'), os.O_RDWR | os.O_CREAT)\n"
+                               "fcntl.flock(fd, fcntl.LOCK_EX); print('held', flush=True); time.sleep(60)",
+                               str(tmp_path)], stdout=subprocess.PIPE, text=True)
     try:
         assert holder.stdout.readline().strip() == "held"
         with pytest.raises(SessionLocked):
