@@ -17,6 +17,7 @@ Recovery, as a robot on a real table needs it:
 from __future__ import annotations
 
 import asyncio
+import errno
 import logging
 import shutil
 import time
@@ -165,8 +166,8 @@ class Acquisition:
         if self.state == State.FAILED:  # the summary says "resume with ...": retry where it failed
             self._retry_after_failure()
         self.j["status"] = "running"
-        self._persist()
         try:
+            self._persist()
             if after_estop:
                 await self.cell.reset_estop()
             await self._prepare_cell()
@@ -186,10 +187,34 @@ class Acquisition:
             self.decide("stopped", reason="stop requested")
         except ObjscanError as exc:
             await self._fail(exc.code, exc.message)
+        except OSError as exc:  # the session folder cannot be written (disk full, removed, read-only)
+            await self._fail("disk_full" if exc.errno in (errno.ENOSPC, errno.EDQUOT) else "io_error",
+                             f"{type(exc).__name__}: {exc}")
         except Exception as exc:  # a bug must end the session visibly, not leave it 'running' forever
             await self._fail("internal", f"{type(exc).__name__}: {exc}")
-        self._persist()
+        self._persist_final()
         return self.status()
+
+    def _persist_final(self) -> None:
+        """The last write of a run. It must not raise (the failure path raising left journals ``running``):
+        if the folder cannot take it, the session ends ``failed`` and the journal alone is written with the
+        space the store set aside."""
+        try:
+            self._persist()
+            return
+        except OSError as exc:
+            code = "disk_full" if exc.errno in (errno.ENOSPC, errno.EDQUOT) else "io_error"
+            if self.j["status"] != "failed":
+                self.j["error"] = {"code": code, "message": f"{type(exc).__name__}: {exc}", "state": self.j["state"]}
+                self.j["state"], self.j["status"] = State.FAILED.value, "failed"
+            else:
+                self.j["error"]["persist_error"] = f"{type(exc).__name__}: {exc}"
+            self.decide("could not write the session folder", code=code)
+        try:
+            self.store.save_journal(self.j, last_resort=True)
+        except OSError as exc:
+            event(log, "the journal could not be written", logging.ERROR, error=repr(exc))
+        self.on_status(self.status())
 
     def _retry_after_failure(self) -> None:
         """Resume a failed session from the state it failed in, with a fresh re-scan budget for that view

@@ -8,6 +8,8 @@ keeps:
 - ``view_KK/view.json`` + ``view_KK/object.ply``: the registered view (static result);
 - ``view_KK/grasps.json``: the plan and what was tried;
 - ``model.ply`` and ``report.json`` at the end;
+- ``.reserve``: 1 MB of disk set aside when the session is created; on a full disk it is released so the
+  journal can still record the failure and its reason (issue 17 #11);
 - ``.session.lock``: held (``fcntl.flock``) by the one orchestrator working on the session (issue 17 #8).
 
 ``SessionStore.create`` makes a new session only in an absent or empty folder, ``SessionStore.open``
@@ -17,6 +19,7 @@ folder it did not create.
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import json
 import os
@@ -41,6 +44,9 @@ from services.registration.cloud import read_ply, write_ply
 
 JOURNAL = "journal.json"
 LOCK = ".session.lock"
+RESERVE = ".reserve"
+RESERVE_BYTES = 1 << 20
+_DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
 
 
 class SessionLocked(ObjscanError):
@@ -71,7 +77,9 @@ class SessionStore:
             what = "already holds a session; resume it or choose another folder" if (path / JOURNAL).is_file() \
                 else "is not an empty folder"
             raise NotASession(f"{path} {what}", detail={"path": str(path)})
-        return cls(path)
+        store = cls(path)
+        store.reserve_space()
+        return store
 
     @classmethod
     def open(cls, path: Path) -> SessionStore:
@@ -79,7 +87,27 @@ class SessionStore:
         path = Path(path)
         if not (path / JOURNAL).is_file():
             raise NotASession(f"{path} has no {JOURNAL} to resume from", detail={"path": str(path)})
-        return cls(path)
+        store = cls(path)
+        store.reserve_space()
+        return store
+
+    def reserve_space(self, nbytes: int = RESERVE_BYTES) -> bool:
+        """Set ``nbytes`` of disk aside (really allocated) for the last journal write; False if the disk is
+        already too full (then the failure journal may not fit: still tried)."""
+        p = self.path / RESERVE
+        if p.is_file() and p.stat().st_size >= nbytes:
+            return True
+        try:
+            fd = os.open(p, os.O_WRONLY | os.O_CREAT, 0o644)
+            try:
+                os.posix_fallocate(fd, 0, nbytes)
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+            return True
+        except OSError:
+            p.unlink(missing_ok=True)
+            return False
 
     # ----------------------------------------------------------------------------------- lock
     def acquire_lock(self) -> SessionStore:
@@ -114,9 +142,18 @@ class SessionStore:
         p = self.path / JOURNAL
         return json.loads(p.read_text()) if p.is_file() else None
 
-    def save_journal(self, journal: dict[str, Any]) -> None:
+    def save_journal(self, journal: dict[str, Any], *, last_resort: bool = False) -> None:
+        """Write the journal atomically. ``last_resort`` (the failure record): on a full disk, release the
+        reserve and try once more, so the session still ends ``failed`` with its reason on disk."""
         journal["updated"] = time.time()
-        atomic_write_json(self.path / JOURNAL, journal)
+        try:
+            atomic_write_json(self.path / JOURNAL, journal)
+        except OSError as exc:
+            reserve = self.path / RESERVE
+            if not (last_resort and exc.errno in _DISK_FULL and reserve.exists()):
+                raise
+            reserve.unlink()
+            atomic_write_json(self.path / JOURNAL, journal)
 
     def write_session_info(self, config: dict[str, Any], views_done: int, turns_deg: list[float],
                            extra: dict[str, Any] | None = None) -> None:
