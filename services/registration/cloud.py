@@ -75,6 +75,9 @@ def check_frame(frame: RGBDFrame) -> None:
         raise CloudError("intrinsics must be finite with positive focal lengths", code="bad_value")
     if not (np.isfinite(frame.depth_scale) and frame.depth_scale > 0):
         raise CloudError("depth_scale must be positive", code="bad_value", detail={"depth_scale": frame.depth_scale})
+    if (frame.meta or {}).get("pose_source") == "unknown":  # issue 17 #12: the identity stood in for a pose
+        raise CloudError("frame has no camera pose (pose_source=unknown: the pose query failed when it was "
+                         "captured); it cannot be placed in base", code="no_camera_pose")
     T = np.asarray(frame.T_base_camera, dtype=np.float64)
     if T.shape != (4, 4) or not np.isfinite(T).all():
         raise CloudError("T_base_camera must be a finite 4x4 matrix", code="bad_value")
