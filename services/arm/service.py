@@ -136,10 +136,12 @@ class ArmService(Service):
     async def scene(self, msg: Message | None, ctx: QueryContext) -> Ok:
         if not isinstance(msg, SceneRequest):
             raise InvalidRequest("expected a SceneRequest", detail={"got": type(msg).__name__})
+        # in the executor: the change waits for a motion check in progress (one lock, services/arm/collision.py),
+        # and that wait must not hold the event loop (stop is answered there)
         if float(np.max(msg.extent)) <= 0.0:
-            self.arm.collision.clear_object()
+            await self.run_cpu(self.arm.collision.clear_object)
         else:
-            self.arm.collision.set_object_box(msg.center, msg.extent, msg.yaw)
+            await self.run_cpu(self.arm.collision.set_object_box, msg.center, msg.extent, msg.yaw)
         return Ok(info={"object_box": bool(np.max(msg.extent) > 0)})
 
     async def state(self, msg: Message | None, ctx: QueryContext) -> JointState:
