@@ -63,12 +63,29 @@ class Machines:
             if out.returncode != 0:
                 raise RuntimeError(f"tc netem {spec} on {dev}: {out.stderr.strip()}")
 
+    def partition(self, a: str, b: str) -> None:
+        """Cut the a-b link (both ends down: packets vanish, no reset is sent; like a pulled cable)."""
+        ia, ib = self.links[(a, b)]
+        _ip("-n", self.ns[a], "link", "set", ia, "down")
+        _ip("-n", self.ns[b], "link", "set", ib, "down")
+
     def popen(self, machine: str, argv: list[str], env: dict[str, str], **kw) -> subprocess.Popen:  # noqa: ANN003
         return subprocess.Popen(["ip", "netns", "exec", self.ns[machine], *argv], env=env, **kw)
 
     def close(self) -> None:
         for ns in self.ns.values():
             subprocess.run(["ip", "netns", "del", ns], capture_output=True)
+
+
+def netem_missing() -> str | None:
+    """None when ``tc netem`` works here, else the reason (containers often lack the sch_netem module)."""
+    m = Machines(["probe"])
+    try:
+        out = subprocess.run(["ip", "netns", "exec", m.ns["probe"], "tc", "qdisc", "add", "dev", "lo", "root",
+                              "netem", "delay", "1ms"], capture_output=True, text=True)
+        return None if out.returncode == 0 else f"tc netem unavailable: {out.stderr.strip()}"
+    finally:
+        m.close()
 
 
 def can_create() -> str | None:
