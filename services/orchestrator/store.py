@@ -44,6 +44,7 @@ from services.registration.cloud import read_ply, write_ply
 
 JOURNAL = "journal.json"
 LOCK = ".session.lock"
+PRE_SESSION = frozenset({"logs"})  # what may be in a new session's folder: ``objscan scan``'s process logs
 RESERVE = ".reserve"
 RESERVE_BYTES = 1 << 20
 _DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
@@ -71,9 +72,10 @@ class SessionStore:
 
     @classmethod
     def create(cls, path: Path) -> SessionStore:
-        """A new session in ``path``, which must be absent or an empty folder (checked before creating it)."""
+        """A new session in ``path``, which must be absent or an empty folder (checked before creating it);
+        ``logs/`` alone is allowed: ``objscan scan`` starts the cell, logging there, before the session."""
         path = Path(path)
-        if path.exists() and (not path.is_dir() or any(path.iterdir())):
+        if path.exists() and (not path.is_dir() or any(p.name not in PRE_SESSION for p in path.iterdir())):
             what = "already holds a session; resume it or choose another folder" if (path / JOURNAL).is_file() \
                 else "is not an empty folder"
             raise NotASession(f"{path} {what}", detail={"path": str(path)})
