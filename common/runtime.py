@@ -10,7 +10,8 @@ with plain ``async def`` handlers, and calls ``run_service(MyService)`` from its
   ``Error`` reply and the service keeps running;
 - bounds the requests in progress (``max_concurrent``): beyond it a request is answered ``overloaded`` at
   once, undecoded; ``priority`` keys (health, every ``stop``) are never refused, so an e-stop always answers
-  while hostile payloads arrive (issue 17 #9, ``objscan bench estop``);
+  while hostile payloads arrive (issue 17 #9, ``objscan bench estop``); ``inline`` keys (the arm's ``stop``,
+  health) run a plain function the moment the loop reaches their query, ahead of handlers queued before it;
 - answers ``objscan/{service}/{instance}/health`` and holds the liveliness token
   ``objscan/@alive/{service}/{instance}`` for as long as it lives;
 - runs CPU-heavy work in an executor (``await self.run_cpu(fn, ...)``) so health keeps answering;
@@ -47,6 +48,7 @@ from common.zenoh_config import ZenohSettings, wait_connected
 log = logging.getLogger("objscan.runtime")
 
 Handler = Callable[[Message | None, "QueryContext"], Awaitable[Message]]
+InlineHandler = Callable[[Message | None, "QueryContext"], Message]
 
 INLINE_DECODE_BYTES = 64 * 1024
 """Payloads up to this size are decoded on the event loop (tens of microseconds); larger ones in the decode
@@ -201,18 +203,26 @@ class Service:
         """Extra figures for the health reply (backend, queue depth, ...)."""
         return {}
 
-    def queryable(self, key: str, handler: Handler, *, complete: bool = True, budget: Budget = DEFAULT_BUDGET,
-                  priority: bool = False) -> None:
+    def queryable(self, key: str, handler: Handler | InlineHandler, *, complete: bool = True,
+                  budget: Budget = DEFAULT_BUDGET, priority: bool = False, inline: bool = False) -> None:
         """Serve ``key`` with ``async def handler(request_message_or_None, ctx) -> reply_message``.
 
         ``budget`` bounds what the key accepts (``COMMAND_BUDGET`` for commands); ``priority`` keys (health,
-        ``stop``) are served even when ``max_concurrent`` requests are already in progress.
+        ``stop``) are served even when ``max_concurrent`` requests are already in progress. ``inline``: the
+        handler is a plain (non-async, quick) function, run and answered as soon as the loop reaches the query
+        instead of in a task queued behind the tasks of queries that arrived just before (an e-stop among a
+        burst of state queries); its budget must allow inline decoding.
         """
         assert self.session is not None and self.loop is not None
+        if inline and budget.max_bytes > INLINE_DECODE_BYTES:
+            raise ValueError(f"an inline key's budget must be <= {INLINE_DECODE_BYTES} bytes")
         loop = self.loop
 
         def on_query(query: zenoh.Query) -> None:  # zenoh thread: hand off only
-            loop.call_soon_threadsafe(self._admit, query, handler, budget, priority)
+            if inline:
+                loop.call_soon_threadsafe(self._serve_inline, query, handler, budget)
+            else:
+                loop.call_soon_threadsafe(self._admit, query, handler, budget, priority)
 
         self._declared.append(self.session.declare_queryable(key, on_query, complete=complete))
 
@@ -283,6 +293,38 @@ class Service:
             return
         self._spawn(self._serve(query, handler, budget, priority))
 
+    def _serve_inline(self, query: zenoh.Query, handler: InlineHandler, budget: Budget) -> None:
+        """On the loop, now: decode (small), run the plain handler, reply; like ``_serve`` without a task."""
+        rid = query.attachment.to_bytes().decode(errors="replace")[:64] if query.attachment else uuid.uuid4().hex[:12]
+        token = request_id.set(rid)
+        key = str(query.key_expr)
+        try:
+            try:
+                payload = query.payload
+                if payload is not None and len(payload) > budget.max_bytes:
+                    raise WireError("payload too large for this key", code="oversize",
+                                    detail={"bytes": len(payload), "max": budget.max_bytes})
+                msg = None if payload is None else decode(payload.to_bytes(), max_bytes=budget.max_bytes,
+                                                          max_elements=budget.max_elements)
+                reply = handler(msg, QueryContext(key=key, parameters=str(query.parameters), request_id=rid))
+            except Exception as exc:  # typed or a bug: an Error reply, the service keeps running
+                reply = self._error_reply(key, exc)
+            query.reply(query.key_expr, reply.encode(), encoding=zenoh.Encoding("application/msgpack"))
+        except Exception as exc:
+            event(log, "could not reply", logging.ERROR, key=key, error=repr(exc))
+        finally:
+            query.drop()
+            request_id.reset(token)
+
+    def _error_reply(self, key: str, exc: BaseException) -> Error:
+        """The ``Error`` reply for a failed request: its typed code, or ``internal`` for a bug (logged)."""
+        if isinstance(exc, ObjscanError):
+            event(log, "request failed", logging.WARNING, key=key, code=exc.code, error=exc.message)
+            return Error(code=exc.code, message=exc.message, detail=_jsonable(exc.detail), service=self.name)
+        event(log, "handler crashed", logging.ERROR, key=key, error=repr(exc))
+        return Error(code="internal", message=f"{type(exc).__name__}: {exc}",
+                     detail={"trace": traceback.format_exc(limit=4)[-2000:]}, service=self.name)
+
     async def _serve(self, query: zenoh.Query, handler: Handler, budget: Budget = DEFAULT_BUDGET,
                      priority: bool = False) -> None:
         rid = query.attachment.to_bytes().decode(errors="replace")[:64] if query.attachment else uuid.uuid4().hex[:12]
@@ -298,13 +340,8 @@ class Service:
                 reply = await handler(msg, QueryContext(key=key, parameters=str(query.parameters), request_id=rid))
             except asyncio.CancelledError:
                 reply = Error(code="shutdown", message=f"{self.name} is shutting down", service=self.name)
-            except ObjscanError as exc:
-                reply = Error(code=exc.code, message=exc.message, detail=_jsonable(exc.detail), service=self.name)
-                event(log, "request failed", logging.WARNING, key=key, code=exc.code, error=exc.message)
-            except Exception as exc:  # a handler bug must not take the service down
-                reply = Error(code="internal", message=f"{type(exc).__name__}: {exc}",
-                              detail={"trace": traceback.format_exc(limit=4)[-2000:]}, service=self.name)
-                event(log, "handler crashed", logging.ERROR, key=key, error=repr(exc))
+            except Exception as exc:  # typed, or a handler bug: it must not take the service down
+                reply = self._error_reply(key, exc)
             query.reply(query.key_expr, reply.encode(), encoding=zenoh.Encoding("application/msgpack"))
             event(log, "served", logging.DEBUG, key=key, ms=(time.perf_counter() - started) * 1e3,
                   reply=type(reply).__name__)
@@ -328,11 +365,11 @@ class Service:
                             detail={"bytes": size, "max": budget.max_bytes})
         return await decode_within(payload.to_bytes(), budget, self._decode_executor)
 
-    async def _health(self, _msg: Message | None, _ctx: QueryContext) -> Message:
-        # busy: requests in progress other than this health query
+    def _health(self, _msg: Message | None, _ctx: QueryContext) -> Message:
+        # busy: requests in progress (this health query is served inline, outside the count)
         info = {**self.health_info(), **({"refused_overloaded": self.refused_overloaded}
                                          if self.refused_overloaded else {})}
-        return Health(service=self.name, instance=self.instance, status="ok", busy=max(self._busy - 1, 0),
+        return Health(service=self.name, instance=self.instance, status="ok", busy=self._busy,
                       uptime_s=time.monotonic() - self._started, info=_jsonable(info))
 
     async def run(self) -> None:
@@ -343,7 +380,8 @@ class Service:
             event(log, "no zenoh link yet; serving anyway, peers may join later", logging.WARNING,
                   connect=",".join(self.settings.zenoh.connect))
         try:
-            self.queryable(keys.health(self.name, self.instance), self._health, budget=COMMAND_BUDGET, priority=True)
+            self.queryable(keys.health(self.name, self.instance), self._health, budget=COMMAND_BUDGET, priority=True,
+                           inline=True)
             await self.setup()
             self._declared.append(self.session.liveliness().declare_token(keys.alive(self.name, self.instance)))
             event(log, "ready", robot=self.robot)

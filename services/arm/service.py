@@ -45,7 +45,7 @@ class ArmService(Service):
         # commands are small: a hostile megabyte is refused unread; stop is never queued behind anything
         self.queryable(keys.arm(r, "move"), self.move, budget=COMMAND_BUDGET)
         self.queryable(keys.arm(r, "gripper"), self.gripper, budget=COMMAND_BUDGET)
-        self.queryable(keys.arm(r, "stop"), self.stop_motion, budget=COMMAND_BUDGET, priority=True)
+        self.queryable(keys.arm(r, "stop"), self.stop_motion, budget=COMMAND_BUDGET, priority=True, inline=True)
         self.queryable(keys.arm(r, "scene"), self.scene, budget=COMMAND_BUDGET)
         self.queryable(keys.arm(r, "state"), self.state, budget=COMMAND_BUDGET)
         self.state_pub = self.publisher(keys.arm(r, "state"), block=False)
@@ -126,7 +126,8 @@ class ArmService(Service):
         reason = last.reason if last is not None else ""
         return GripperResult(opening=float(info["opening"]), holding=bool(info["grasped"]), reason=reason)
 
-    async def stop_motion(self, msg: Message | None, ctx: QueryContext) -> Ok:
+    def stop_motion(self, msg: Message | None, ctx: QueryContext) -> Ok:
+        """Inline (``common/runtime.py``): runs the moment the loop reaches the query, ahead of queued work."""
         if isinstance(msg, Request) and msg.params.get("reset"):
             self.arm.reset_estop()
             return Ok(info={"estopped": False})
