@@ -153,7 +153,11 @@ def run(args) -> int:  # noqa: ANN001
         if args.resume:
             params = {"resume": str(session_dir)}
         else:
-            params = {"out": str(session_dir), "config": {
+            # a joined cell's orchestrator (objscan up, compose) writes under its own --sessions root: without
+            # --out, name the session and let it place it there (a local absolute path would be refused)
+            joined = "orchestrator" not in group.procs
+            out = session_dir.name if joined and not args.out else str(session_dir)
+            params = {"out": out, "config": {
                 "object": args.object, "views": args.views, "profile": args.profile, "seed": args.seed,
                 "width": args.width, "height": args.height, "force_first_slip": args.force_first_slip}}
             params["record"] = not args.no_record
@@ -174,7 +178,7 @@ def run(args) -> int:  # noqa: ANN001
         signal.signal(signal.SIGINT, on_sigint)
         final = _follow(updates, args.views if not args.resume else None, session=mine)
         sub.undeclare()
-    return _summary(final, session_dir, time.time() - t0)
+    return _summary(final, Path(mine), time.time() - t0)
 
 
 def _follow(updates: queue.Queue[dict[str, Any]], views: int | None, session: str | None = None) -> dict[str, Any]:
