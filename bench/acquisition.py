@@ -22,7 +22,9 @@ from services.cli.cells import cell_specs
 
 def acquire(out: Path, *, object_name: str, views: int, profile: str, seed: int, log_dir: Path) -> dict[str, Any]:
     with ServiceGroup(log_dir=log_dir) as group:
-        group.launch(cell_specs(), timeout=300)
+        # the orchestrator writes sessions only under its --sessions root: the session's parent folder
+        group.launch(cell_specs(extra_args={"orchestrator": ["--sessions", str(Path(out).resolve().parent)]}),
+                     timeout=300)
         t0 = time.perf_counter()
         request_sync(group.session, keys.orchestrator(keys.DEFAULT_ROBOT, "run"), Request(params={
             "out": str(out), "config": {"object": object_name, "views": views, "profile": profile, "seed": seed}}),

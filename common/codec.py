@@ -24,7 +24,7 @@ import msgpack
 import numpy as np
 
 from common.errors import WireError
-from common.msgpack_view import unpack_view
+from common.msgpack_view import MAX_ELEMENTS, ElementBudgetExceeded, unpack_view
 
 MAX_PAYLOAD_BYTES = 512 * 1024 * 1024
 """Largest message accepted. A 1M-point colored cloud with normals is ~27 MB; a 1280x720 RGB-D ~4.6 MB."""
@@ -161,18 +161,24 @@ def _to_wire(msg: Message) -> dict[str, Any]:
 
 # ----------------------------------------------------------------------------------------------- decode
 
-def decode(payload: bytes | bytearray | memoryview) -> Message:
+def decode(payload: bytes | bytearray | memoryview, *, max_bytes: int = MAX_PAYLOAD_BYTES,
+           max_elements: int = MAX_ELEMENTS) -> Message:
     """Parse and validate msgpack bytes into the message class named by its ``type``.
 
-    Arrays share ``payload``'s memory (read-only views): no copy of the bulk data.
+    Arrays share ``payload``'s memory (read-only views): no copy of the bulk data. ``max_bytes`` and
+    ``max_elements`` are the receiving key's budget (``common.runtime.Budget``): a payload over either is
+    refused with code ``oversize`` / ``too_many_elements`` before (or early in) parsing.
     """
     if payload is None or len(payload) == 0:
         raise WireError("empty payload", code="malformed")
-    if len(payload) > MAX_PAYLOAD_BYTES:
-        raise WireError("payload too large", code="oversize",
-                        detail={"bytes": len(payload), "max": MAX_PAYLOAD_BYTES})
+    limit = min(max_bytes, MAX_PAYLOAD_BYTES)
+    if len(payload) > limit:
+        raise WireError("payload too large", code="oversize", detail={"bytes": len(payload), "max": limit})
     try:
-        raw = unpack_view(payload)
+        raw = unpack_view(payload, max_elements)
+    except ElementBudgetExceeded:
+        raise WireError("payload holds too many elements", code="too_many_elements",
+                        detail={"max": max_elements}) from None
     except (ValueError, TypeError, struct.error) as exc:
         raise WireError(f"not valid msgpack: {exc}", code="malformed") from None
     return _from_wire(raw, path="")

@@ -11,7 +11,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -54,6 +54,7 @@ class ServiceGroup:
         self._logs: list[object] = []
         self._start_router = start_router
         self._session: zenoh.Session | None = None
+        self.cleanups: list[Callable[[], object]] = []  # run by stop_all, after the processes (e.g. a lock)
 
     # ---------------------------------------------------------------------------------------------
     def env(self, extra: dict[str, str] | None = None) -> dict[str, str]:
@@ -156,6 +157,8 @@ class ServiceGroup:
         for fh in self._logs:
             fh.close()  # type: ignore[attr-defined]
         self._logs.clear()
+        while self.cleanups:
+            self.cleanups.pop()()
 
     def __enter__(self) -> ServiceGroup:
         return self

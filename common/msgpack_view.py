@@ -17,6 +17,8 @@ from typing import Any
 
 MAX_DEPTH = 32
 MAX_CONTAINER = 1 << 20
+MAX_ELEMENTS = 1 << 20
+"""Default budget of container elements (array items + map entries, summed over the whole message)."""
 
 _U16 = struct.Struct(">H")
 _U32 = struct.Struct(">I")
@@ -29,11 +31,20 @@ _F32 = struct.Struct(">f")
 _F64 = struct.Struct(">d")
 
 
-def unpack_view(payload: bytes | bytearray | memoryview) -> Any:
-    """Parse one msgpack object that spans all of ``payload``; bins come back as memoryviews."""
+class ElementBudgetExceeded(ValueError):
+    """The message declares more container elements than its receiver's budget allows."""
+
+
+def unpack_view(payload: bytes | bytearray | memoryview, max_elements: int = MAX_ELEMENTS) -> Any:
+    """Parse one msgpack object that spans all of ``payload``; bins come back as memoryviews.
+
+    ``max_elements`` bounds the work: every container's declared length is charged to the budget *before*
+    its elements are read, so a payload of millions of tiny arrays is refused after at most
+    ``max_elements`` items of parsing (a 5 MB one took seconds of pure-Python work before; issue 17 #9).
+    """
     view = memoryview(payload).cast("B") if not isinstance(payload, memoryview) else payload.cast("B")
     try:
-        obj, end = _read(view, 0, 0)
+        obj, end = _read(view, 0, 0, [max_elements])
     except IndexError:
         raise ValueError("truncated message") from None
     if end != len(view):
@@ -46,7 +57,7 @@ def _need(view: memoryview, pos: int, n: int) -> None:
         raise ValueError(f"truncated: need {n} bytes at offset {pos}, have {len(view) - pos}")
 
 
-def _read(view: memoryview, pos: int, depth: int) -> tuple[Any, int]:
+def _read(view: memoryview, pos: int, depth: int, budget: list[int]) -> tuple[Any, int]:
     b = view[pos]  # IndexError past the end: reported as truncated
     pos += 1
     if 0xA0 <= b <= 0xBF:  # fixstr: map keys, the most common item
@@ -65,9 +76,9 @@ def _read(view: memoryview, pos: int, depth: int) -> tuple[Any, int]:
     if b >= 0xE0:
         return b - 0x100, pos
     if 0x80 <= b <= 0x8F:
-        return _read_map(view, pos, b & 0x0F, depth)
+        return _read_map(view, pos, b & 0x0F, depth, budget)
     if 0x90 <= b <= 0x9F:
-        return _read_array(view, pos, b & 0x0F, depth)
+        return _read_array(view, pos, b & 0x0F, depth, budget)
     if b == 0xC0:
         return None, pos
     if b == 0xC2:
@@ -101,10 +112,10 @@ def _read(view: memoryview, pos: int, depth: int) -> tuple[Any, int]:
         return _read_str(view, pos, n)
     if b in (0xDC, 0xDD):
         n, pos = _read_len(view, pos, b - 0xDC + 1)
-        return _read_array(view, pos, n, depth)
+        return _read_array(view, pos, n, depth, budget)
     if b in (0xDE, 0xDF):
         n, pos = _read_len(view, pos, b - 0xDE + 1)
-        return _read_map(view, pos, n, depth)
+        return _read_map(view, pos, n, depth, budget)
     raise ValueError(f"unsupported msgpack type byte 0x{b:02x} at offset {pos - 1}")
 
 
@@ -128,24 +139,33 @@ def _read_str(view: memoryview, pos: int, n: int) -> tuple[str, int]:
         raise ValueError(f"invalid UTF-8 string at offset {pos}") from None
 
 
-def _read_array(view: memoryview, pos: int, n: int, depth: int) -> tuple[list[Any], int]:
+def _charge(budget: list[int], n: int) -> None:
+    """Take ``n`` elements from the message's budget (a one-item list shared by the whole parse)."""
+    budget[0] -= n
+    if budget[0] < 0:
+        raise ElementBudgetExceeded("message holds more elements than this key accepts")
+
+
+def _read_array(view: memoryview, pos: int, n: int, depth: int, budget: list[int]) -> tuple[list[Any], int]:
     if n > MAX_CONTAINER or n > len(view) - pos:  # every element takes at least one byte
         raise ValueError(f"array of {n} elements cannot fit")
+    _charge(budget, n)
     out = []
     for _ in range(n):
-        item, pos = _read(view, pos, depth + 1)
+        item, pos = _read(view, pos, depth + 1, budget)
         out.append(item)
     return out, pos
 
 
-def _read_map(view: memoryview, pos: int, n: int, depth: int) -> tuple[dict[str, Any], int]:
+def _read_map(view: memoryview, pos: int, n: int, depth: int, budget: list[int]) -> tuple[dict[str, Any], int]:
     if n > MAX_CONTAINER or 2 * n > len(view) - pos:
         raise ValueError(f"map of {n} entries cannot fit")
+    _charge(budget, n)
     out: dict[str, Any] = {}
     for _ in range(n):
-        key, pos = _read(view, pos, depth + 1)
+        key, pos = _read(view, pos, depth + 1, budget)
         if not isinstance(key, str):
             raise ValueError("map keys must be strings")
-        value, pos = _read(view, pos, depth + 1)
+        value, pos = _read(view, pos, depth + 1, budget)
         out[key] = value
     return out, pos

@@ -5,8 +5,13 @@ with plain ``async def`` handlers, and calls ``run_service(MyService)`` from its
 
 - hands every Zenoh callback straight to the event loop (no work, no Zenoh calls on Zenoh's threads)
   and sends replies from the loop;
-- decodes requests strictly; any exception in a handler becomes a typed ``Error`` reply and the service
-  keeps running;
+- decodes requests strictly, within the key's ``Budget`` (bytes and msgpack elements, checked before the
+  payload is copied or parsed), large ones off the event loop; any exception in a handler becomes a typed
+  ``Error`` reply and the service keeps running;
+- bounds the requests in progress (``max_concurrent``): beyond it a request is answered ``overloaded`` at
+  once, undecoded; ``priority`` keys (health, every ``stop``) are never refused, so an e-stop always answers
+  while hostile payloads arrive (issue 17 #9, ``objscan bench estop``); ``inline`` keys (the arm's ``stop``,
+  health) run a plain function the moment the loop reaches their query, ahead of handlers queued before it;
 - answers ``objscan/{service}/{instance}/health`` and holds the liveliness token
   ``objscan/@alive/{service}/{instance}`` for as long as it lives;
 - runs CPU-heavy work in an executor (``await self.run_cpu(fn, ...)``) so health keeps answering;
@@ -33,7 +38,7 @@ import zenoh
 
 from common import keys
 from common.client import DEFAULT_TIMEOUT_S, request
-from common.codec import Message, decode
+from common.codec import MAX_PAYLOAD_BYTES, Message, decode
 from common.errors import ObjscanError, WireError
 from common.log import event, request_id, setup_logging
 from common.memory import tune_malloc
@@ -43,6 +48,38 @@ from common.zenoh_config import ZenohSettings, wait_connected
 log = logging.getLogger("objscan.runtime")
 
 Handler = Callable[[Message | None, "QueryContext"], Awaitable[Message]]
+InlineHandler = Callable[[Message | None, "QueryContext"], Message]
+
+INLINE_DECODE_BYTES = 64 * 1024
+"""Payloads up to this size are decoded on the event loop (tens of microseconds); larger ones in the decode
+thread, so the loop keeps answering ``stop`` and health while a big or hostile payload is parsed."""
+
+MAX_CONCURRENT = 32
+"""Requests in progress per service beyond which a new (non-priority) one is refused ``overloaded``."""
+
+
+@dataclass(frozen=True)
+class Budget:
+    """What one key accepts: at most ``max_bytes`` of payload and ``max_elements`` msgpack container
+    elements (array items + map entries over the whole message; a numpy array counts as one ``bin``)."""
+
+    max_bytes: int = MAX_PAYLOAD_BYTES
+    max_elements: int = 1 << 16
+
+    def __post_init__(self) -> None:
+        for name in ("max_bytes", "max_elements"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"Budget.{name} must be a positive integer, got {value!r}")
+        if self.max_bytes > MAX_PAYLOAD_BYTES:
+            raise ValueError(f"Budget.max_bytes {self.max_bytes} exceeds the codec's {MAX_PAYLOAD_BYTES}")
+
+
+DEFAULT_BUDGET = Budget()
+"""Keys that take data (frames, clouds): any size the codec allows, few elements."""
+
+COMMAND_BUDGET = Budget(max_bytes=64 * 1024, max_elements=4096)
+"""Commands and queries (a pose, joints, a box, a small config map): a hostile megabyte is refused unread."""
 
 
 @dataclass
@@ -72,8 +109,10 @@ class ServiceSettings:
 class AsyncSubscription:
     """Samples of a subscription, delivered to an asyncio queue (drop-oldest when full)."""
 
-    def __init__(self, session: zenoh.Session, key: str, loop: asyncio.AbstractEventLoop, maxsize: int):
+    def __init__(self, session: zenoh.Session, key: str, loop: asyncio.AbstractEventLoop, maxsize: int,
+                 budget: Budget = DEFAULT_BUDGET):
         self._loop = loop
+        self.budget = budget
         self.queue: asyncio.Queue[tuple[str, bytes]] = asyncio.Queue(maxsize=maxsize)
         self._sub = session.declare_subscriber(key, self._on_sample)
 
@@ -91,12 +130,25 @@ class AsyncSubscription:
         while True:
             key, payload = await self.queue.get()
             try:
-                return key, decode(payload)
+                return key, await decode_within(payload, self.budget)
             except WireError as exc:
                 event(log, "dropped malformed sample", logging.WARNING, key=key, code=exc.code)
 
     def undeclare(self) -> None:
         self._sub.undeclare()
+
+
+async def decode_within(payload: bytes, budget: Budget,
+                        executor: concurrent.futures.Executor | None = None) -> Message:
+    """Decode ``payload`` within ``budget``: small ones right here, large ones in ``executor`` (a thread),
+    so that parsing never holds the event loop for long."""
+    if len(payload) > budget.max_bytes:
+        raise WireError("payload too large for this key", code="oversize",
+                        detail={"bytes": len(payload), "max": budget.max_bytes})
+    if len(payload) <= INLINE_DECODE_BYTES:
+        return decode(payload, max_bytes=budget.max_bytes, max_elements=budget.max_elements)
+    return await asyncio.get_running_loop().run_in_executor(
+        executor, lambda: decode(payload, max_bytes=budget.max_bytes, max_elements=budget.max_elements))
 
 
 class Publisher:
@@ -129,10 +181,16 @@ class Service:
         self._declared: list[Any] = []
         self._tasks: set[asyncio.Task[Any]] = set()
         self._busy = 0
+        self._bounded = 0  # requests in progress on non-priority keys (bounded by max_concurrent)
+        self.max_concurrent = MAX_CONCURRENT
+        self.refused_overloaded = 0
         self._started = time.monotonic()
         self._stop = asyncio.Event()
         self._executor = concurrent.futures.ThreadPoolExecutor(max_workers=self.settings.cpu_workers,
                                                                thread_name_prefix=f"{self.name}-cpu")
+        # one thread: decoding is GIL-bound, more threads would only take more turns from the loop
+        self._decode_executor = concurrent.futures.ThreadPoolExecutor(max_workers=1,
+                                                                      thread_name_prefix=f"{self.name}-decode")
 
     # -------------------------------------------------------------------------------- for subclasses
     async def setup(self) -> None:
@@ -145,13 +203,26 @@ class Service:
         """Extra figures for the health reply (backend, queue depth, ...)."""
         return {}
 
-    def queryable(self, key: str, handler: Handler, *, complete: bool = True) -> None:
-        """Serve ``key`` with ``async def handler(request_message_or_None, ctx) -> reply_message``."""
+    def queryable(self, key: str, handler: Handler | InlineHandler, *, complete: bool = True,
+                  budget: Budget = DEFAULT_BUDGET, priority: bool = False, inline: bool = False) -> None:
+        """Serve ``key`` with ``async def handler(request_message_or_None, ctx) -> reply_message``.
+
+        ``budget`` bounds what the key accepts (``COMMAND_BUDGET`` for commands); ``priority`` keys (health,
+        ``stop``) are served even when ``max_concurrent`` requests are already in progress. ``inline``: the
+        handler is a plain (non-async, quick) function, run and answered as soon as the loop reaches the query
+        instead of in a task queued behind the tasks of queries that arrived just before (an e-stop among a
+        burst of state queries); its budget must allow inline decoding.
+        """
         assert self.session is not None and self.loop is not None
+        if inline and budget.max_bytes > INLINE_DECODE_BYTES:
+            raise ValueError(f"an inline key's budget must be <= {INLINE_DECODE_BYTES} bytes")
         loop = self.loop
 
         def on_query(query: zenoh.Query) -> None:  # zenoh thread: hand off only
-            loop.call_soon_threadsafe(self._spawn, self._serve(query, handler))
+            if inline:
+                loop.call_soon_threadsafe(self._serve_inline, query, handler, budget)
+            else:
+                loop.call_soon_threadsafe(self._admit, query, handler, budget, priority)
 
         self._declared.append(self.session.declare_queryable(key, on_query, complete=complete))
 
@@ -161,9 +232,9 @@ class Service:
         self._declared.append(pub)
         return pub
 
-    def subscribe(self, key: str, *, maxsize: int = 16) -> AsyncSubscription:
+    def subscribe(self, key: str, *, maxsize: int = 16, budget: Budget = DEFAULT_BUDGET) -> AsyncSubscription:
         assert self.session is not None and self.loop is not None
-        sub = AsyncSubscription(self.session, key, self.loop, maxsize)
+        sub = AsyncSubscription(self.session, key, self.loop, maxsize, budget)
         self._declared.append(sub)
         return sub
 
@@ -207,25 +278,70 @@ class Service:
             exc = task.exception()
             event(log, "background task failed", logging.ERROR, error=repr(exc))
 
-    async def _serve(self, query: zenoh.Query, handler: Handler) -> None:
+    def _admit(self, query: zenoh.Query, handler: Handler, budget: Budget, priority: bool) -> None:
+        """On the loop: start serving ``query``, or refuse it at once when too many are in progress."""
+        if not priority and self._bounded >= self.max_concurrent:
+            self.refused_overloaded += 1
+            reply = Error(code="overloaded", message=f"{self.name} has {self._bounded} requests in progress",
+                          detail={"max_concurrent": self.max_concurrent}, service=self.name)
+            try:
+                query.reply(query.key_expr, reply.encode(), encoding=zenoh.Encoding("application/msgpack"))
+            except Exception as exc:
+                event(log, "could not reply", logging.ERROR, key=str(query.key_expr), error=repr(exc))
+            finally:
+                query.drop()
+            return
+        self._spawn(self._serve(query, handler, budget, priority))
+
+    def _serve_inline(self, query: zenoh.Query, handler: InlineHandler, budget: Budget) -> None:
+        """On the loop, now: decode (small), run the plain handler, reply; like ``_serve`` without a task."""
+        rid = query.attachment.to_bytes().decode(errors="replace")[:64] if query.attachment else uuid.uuid4().hex[:12]
+        token = request_id.set(rid)
+        key = str(query.key_expr)
+        try:
+            try:
+                payload = query.payload
+                if payload is not None and len(payload) > budget.max_bytes:
+                    raise WireError("payload too large for this key", code="oversize",
+                                    detail={"bytes": len(payload), "max": budget.max_bytes})
+                msg = None if payload is None else decode(payload.to_bytes(), max_bytes=budget.max_bytes,
+                                                          max_elements=budget.max_elements)
+                reply = handler(msg, QueryContext(key=key, parameters=str(query.parameters), request_id=rid))
+            except Exception as exc:  # typed or a bug: an Error reply, the service keeps running
+                reply = self._error_reply(key, exc)
+            query.reply(query.key_expr, reply.encode(), encoding=zenoh.Encoding("application/msgpack"))
+        except Exception as exc:
+            event(log, "could not reply", logging.ERROR, key=key, error=repr(exc))
+        finally:
+            query.drop()
+            request_id.reset(token)
+
+    def _error_reply(self, key: str, exc: BaseException) -> Error:
+        """The ``Error`` reply for a failed request: its typed code, or ``internal`` for a bug (logged)."""
+        if isinstance(exc, ObjscanError):
+            event(log, "request failed", logging.WARNING, key=key, code=exc.code, error=exc.message)
+            return Error(code=exc.code, message=exc.message, detail=_jsonable(exc.detail), service=self.name)
+        event(log, "handler crashed", logging.ERROR, key=key, error=repr(exc))
+        return Error(code="internal", message=f"{type(exc).__name__}: {exc}",
+                     detail={"trace": traceback.format_exc(limit=4)[-2000:]}, service=self.name)
+
+    async def _serve(self, query: zenoh.Query, handler: Handler, budget: Budget = DEFAULT_BUDGET,
+                     priority: bool = False) -> None:
         rid = query.attachment.to_bytes().decode(errors="replace")[:64] if query.attachment else uuid.uuid4().hex[:12]
         token = request_id.set(rid)
         key = str(query.key_expr)
         started = time.perf_counter()
         self._busy += 1
+        if not priority:
+            self._bounded += 1
         try:
             try:
-                msg = decode(query.payload.to_bytes()) if query.payload is not None else None
+                msg = await self._decode_query(query, budget)
                 reply = await handler(msg, QueryContext(key=key, parameters=str(query.parameters), request_id=rid))
             except asyncio.CancelledError:
                 reply = Error(code="shutdown", message=f"{self.name} is shutting down", service=self.name)
-            except ObjscanError as exc:
-                reply = Error(code=exc.code, message=exc.message, detail=_jsonable(exc.detail), service=self.name)
-                event(log, "request failed", logging.WARNING, key=key, code=exc.code, error=exc.message)
-            except Exception as exc:  # a handler bug must not take the service down
-                reply = Error(code="internal", message=f"{type(exc).__name__}: {exc}",
-                              detail={"trace": traceback.format_exc(limit=4)[-2000:]}, service=self.name)
-                event(log, "handler crashed", logging.ERROR, key=key, error=repr(exc))
+            except Exception as exc:  # typed, or a handler bug: it must not take the service down
+                reply = self._error_reply(key, exc)
             query.reply(query.key_expr, reply.encode(), encoding=zenoh.Encoding("application/msgpack"))
             event(log, "served", logging.DEBUG, key=key, ms=(time.perf_counter() - started) * 1e3,
                   reply=type(reply).__name__)
@@ -233,13 +349,28 @@ class Service:
             event(log, "could not reply", logging.ERROR, key=key, error=repr(exc))
         finally:
             self._busy -= 1
+            if not priority:
+                self._bounded -= 1
             query.drop()
             request_id.reset(token)
 
-    async def _health(self, _msg: Message | None, _ctx: QueryContext) -> Message:
-        # busy: requests in progress other than this health query
-        return Health(service=self.name, instance=self.instance, status="ok", busy=max(self._busy - 1, 0),
-                      uptime_s=time.monotonic() - self._started, info=_jsonable(self.health_info()))
+    async def _decode_query(self, query: zenoh.Query, budget: Budget) -> Message | None:
+        """The query's message, within ``budget``; the size is checked before the payload is even copied."""
+        payload = query.payload
+        if payload is None:
+            return None
+        size = len(payload)
+        if size > budget.max_bytes:
+            raise WireError("payload too large for this key", code="oversize",
+                            detail={"bytes": size, "max": budget.max_bytes})
+        return await decode_within(payload.to_bytes(), budget, self._decode_executor)
+
+    def _health(self, _msg: Message | None, _ctx: QueryContext) -> Message:
+        # busy: requests in progress (this health query is served inline, outside the count)
+        info = {**self.health_info(), **({"refused_overloaded": self.refused_overloaded}
+                                         if self.refused_overloaded else {})}
+        return Health(service=self.name, instance=self.instance, status="ok", busy=self._busy,
+                      uptime_s=time.monotonic() - self._started, info=_jsonable(info))
 
     async def run(self) -> None:
         """Open the session, serve until stopped, then shut down cleanly."""
@@ -249,7 +380,8 @@ class Service:
             event(log, "no zenoh link yet; serving anyway, peers may join later", logging.WARNING,
                   connect=",".join(self.settings.zenoh.connect))
         try:
-            self.queryable(keys.health(self.name, self.instance), self._health)
+            self.queryable(keys.health(self.name, self.instance), self._health, budget=COMMAND_BUDGET, priority=True,
+                           inline=True)
             await self.setup()
             self._declared.append(self.session.liveliness().declare_token(keys.alive(self.name, self.instance)))
             event(log, "ready", robot=self.robot)
@@ -269,6 +401,7 @@ class Service:
                     except Exception:  # already gone with the session
                         pass
                 self._executor.shutdown(wait=False, cancel_futures=True)
+                self._decode_executor.shutdown(wait=False, cancel_futures=True)
                 self.session.close()
                 event(log, "stopped")
 

@@ -8,15 +8,14 @@ Layout (documented in docs/session-folder.md)::
     SESSION/view_KK/scan_J/meta.json           intrinsics, depth_scale, T_base_camera (+ ground truth in sim)
 
 The orchestrator writes it as it captures, the camera's replay backend and ``objscan reconstruct`` read
-it. Every file is written to a temporary name and renamed, so a crash never leaves a half-written scan
+it. Every file is written atomically (``common.atomic``: unique temporary name, fsync, rename, folder
+fsync), so a crash never leaves a half-written scan
 that a reader would take for a real one. Keys a reader does not know are ignored.
 """
 
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,10 +23,12 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
+from common.atomic import atomic_write_bytes
 from common.errors import ObjscanError
 from common.messages import Intrinsics, RGBDFrame
 
 SESSION_FILE = "session.json"
+__all__ = ["atomic_write_bytes", "atomic_write_json"]  # re-exported: the one atomic writer is common.atomic
 
 
 class SessionFolderError(ObjscanError):
@@ -42,25 +43,6 @@ def view_dir(session: Path, view: int) -> Path:
 
 def scan_dir(session: Path, view: int, scan: int) -> Path:
     return view_dir(session, view) / f"scan_{scan}"
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file, fsync, then rename (crash-safe)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; a session folder is meant to be shared
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def atomic_write_json(path: Path, obj: Any) -> None:

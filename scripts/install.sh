@@ -25,7 +25,7 @@ apt_install() {
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "$@" >/dev/null
 }
 
-SYSTEM_PACKAGES=(libusb-1.0-0 libudev1 libgomp1 libgl1 libegl1 libx11-6 python3-venv)
+SYSTEM_PACKAGES=(libusb-1.0-0 libudev1 libgomp1 libgl1 libegl1 libx11-6 python3-venv iproute2)  # iproute2: the netns test
 missing=()
 for pkg in "${SYSTEM_PACKAGES[@]}"; do
   dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")

@@ -10,11 +10,20 @@ whose top is the plane z = 0 of ``base``) and an optional box around the object.
   by construction in the PAPRAS meshes and are ignored.
 
 A colliding configuration or motion is refused with ``CollisionError`` naming the two bodies.
+
+Thread safety (issue 17 #10): the arm service checks motions in executor threads while ``arm/scene`` may
+change the object box. Pinocchio's geometry model and data are not safe to mutate during a check (a box
+changed mid-check corrupted the heap and killed the arm process), so one lock covers every scene change
+and every query, and a trajectory is checked against one scene from its first sample to its last.
 """
 
 from __future__ import annotations
 
+import functools
+import threading
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import coal
 import numpy as np
@@ -27,6 +36,18 @@ from services.arm.motion import JointTrajectory
 TABLE = "table"
 OBJECT = "object"
 HAND_CHAIN_INDEX = 6  # bodies on joint 6 and after (end link, gripper, camera mount, fingers) move together
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def _exclusive(method: F) -> F:
+    """Run ``method`` holding the world's lock (re-entrant: a trajectory check calls ``first_contact``)."""
+
+    @functools.wraps(method)
+    def locked(self: CollisionWorld, *args: Any, **kwargs: Any) -> Any:
+        with self._lock:
+            return method(self, *args, **kwargs)
+
+    return locked  # type: ignore[return-value]
 
 
 @dataclass
@@ -58,6 +79,7 @@ class CollisionWorld:
 
     def __init__(self, kinematics: Kinematics, config: CollisionConfig | None = None):
         self.kin = kinematics
+        self._lock = threading.RLock()
         self.config = config or CollisionConfig()
         cfg = self.config
         self.model = kinematics.full_model
@@ -112,6 +134,7 @@ class CollisionWorld:
             if self._body[b] == OBJECT and self._chain_index(a) >= HAND_CHAIN_INDEX
         }
 
+    @_exclusive
     def set_object_box(self, center: np.ndarray, size: np.ndarray, yaw: float = 0.0) -> None:
         """Add (or move) the box around the object: ``center`` of the box in ``base``, full ``size`` (m)."""
         c = np.asarray(center, dtype=np.float64)
@@ -135,6 +158,7 @@ class CollisionWorld:
         h = height + padding
         self.set_object_box(np.array([xy[0], xy[1], h / 2.0]), np.array([side, side, h]))
 
+    @_exclusive
     def clear_object(self) -> None:
         """Remove the object box (e.g. while the object is in the hand)."""
         if self._object is None:
@@ -150,6 +174,7 @@ class CollisionWorld:
         return self._object is not None
 
     # ------------------------------------------------------------------ queries
+    @_exclusive
     def first_contact(self, q: np.ndarray, opening: float = 0.0, allow_hand_object: bool = False) -> Contact | None:
         """The first colliding pair at arm configuration ``q`` with the fingers at ``opening``, or None."""
         qf = self.kin.full_q(q, opening=opening)
@@ -170,6 +195,7 @@ class CollisionWorld:
             return Contact(self._body[a], self._body[b])
         return None
 
+    @_exclusive
     def check_configuration(self, q: np.ndarray, opening: float = 0.0, allow_hand_object: bool = False) -> None:
         """Raise ``CollisionError`` naming the pair if ``q`` collides."""
         c = self.first_contact(q, opening, allow_hand_object)
@@ -179,6 +205,7 @@ class CollisionWorld:
                 detail={"link_a": c.body_a, "link_b": c.body_b, "q": np.round(q, 4).tolist()},
             )
 
+    @_exclusive
     def check_trajectory(
         self, trajectory: JointTrajectory, opening: float = 0.0, allow_hand_object: bool = False
     ) -> int:

@@ -24,7 +24,7 @@ from common.api import GripperRequest, GripperResult, MoveRequest, MoveResult, S
 from common.codec import Message
 from common.errors import InvalidRequest
 from common.messages import JointState, Ok, Request
-from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from common.runtime import COMMAND_BUDGET, QueryContext, Service, run_service, service_arg_parser, settings_from_args
 from services.arm.arm import ArmConfig, ArmController
 from services.arm.drivers.registry import BACKENDS, DriverContext, driver_entry, make_driver
 from services.arm.kinematics import Kinematics
@@ -45,11 +45,12 @@ class ArmService(Service):
         self.arm = ArmController(driver, config, kinematics=kin)
         await self.run_cpu(self.arm.connect)
         r = self.robot
-        self.queryable(keys.arm(r, "move"), self.move)
-        self.queryable(keys.arm(r, "gripper"), self.gripper)
-        self.queryable(keys.arm(r, "stop"), self.stop_motion)
-        self.queryable(keys.arm(r, "scene"), self.scene)
-        self.queryable(keys.arm(r, "state"), self.state)
+        # commands are small: a hostile megabyte is refused unread; stop is never queued behind anything
+        self.queryable(keys.arm(r, "move"), self.move, budget=COMMAND_BUDGET)
+        self.queryable(keys.arm(r, "gripper"), self.gripper, budget=COMMAND_BUDGET)
+        self.queryable(keys.arm(r, "stop"), self.stop_motion, budget=COMMAND_BUDGET, priority=True, inline=True)
+        self.queryable(keys.arm(r, "scene"), self.scene, budget=COMMAND_BUDGET)
+        self.queryable(keys.arm(r, "state"), self.state, budget=COMMAND_BUDGET)
         self.state_pub = self.publisher(keys.arm(r, "state"), block=False)
         self.spawn(self._stream_state())
 
@@ -108,7 +109,8 @@ class ArmService(Service):
         reason = last.reason if last is not None else ""
         return GripperResult(opening=float(info["opening"]), holding=bool(info["grasped"]), reason=reason)
 
-    async def stop_motion(self, msg: Message | None, ctx: QueryContext) -> Ok:
+    def stop_motion(self, msg: Message | None, ctx: QueryContext) -> Ok:
+        """Inline (``common/runtime.py``): runs the moment the loop reaches the query, ahead of queued work."""
         if isinstance(msg, Request) and msg.params.get("reset"):
             self.arm.reset_estop()
             return Ok(info={"estopped": False})
@@ -118,10 +120,12 @@ class ArmService(Service):
     async def scene(self, msg: Message | None, ctx: QueryContext) -> Ok:
         if not isinstance(msg, SceneRequest):
             raise InvalidRequest("expected a SceneRequest", detail={"got": type(msg).__name__})
+        # in the executor: the change waits for a motion check in progress (one lock, services/arm/collision.py),
+        # and that wait must not hold the event loop (stop is answered there)
         if float(np.max(msg.extent)) <= 0.0:
-            self.arm.collision.clear_object()
+            await self.run_cpu(self.arm.collision.clear_object)
         else:
-            self.arm.collision.set_object_box(msg.center, msg.extent, msg.yaw)
+            await self.run_cpu(self.arm.collision.set_object_box, msg.center, msg.extent, msg.yaw)
         return Ok(info={"object_box": bool(np.max(msg.extent) > 0)})
 
     async def state(self, msg: Message | None, ctx: QueryContext) -> JointState:

@@ -20,7 +20,7 @@ from common.api import CaptureRequest
 from common.codec import Message
 from common.errors import ObjscanError
 from common.messages import JointState, RGBDFrame
-from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from common.runtime import COMMAND_BUDGET, QueryContext, Service, run_service, service_arg_parser, settings_from_args
 from services.calibration.file import calibration_from_env
 from services.camera.base import POSE_SOURCE_KEY
 from services.camera.factory import make_camera
@@ -49,7 +49,7 @@ class CameraService(Service):
         self.camera = make_camera(config, render_request=self._render if self.backend == "sim" else None)
         await self.run_cpu(self.camera.connect)
         self.captures = 0
-        self.queryable(keys.camera_capture(self.robot), self.capture)
+        self.queryable(keys.camera_capture(self.robot), self.capture, budget=COMMAND_BUDGET)
 
     async def _render(self, T_base_camera: np.ndarray | None, width: int, height: int) -> RGBDFrame:
         reply = await self.request(keys.sim(self.robot, "render"), CaptureRequest(width=width, height=height),

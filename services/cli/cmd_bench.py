@@ -9,6 +9,7 @@ from pathlib import Path
 
 import bench
 from bench.report import print_figures
+from common.atomic import atomic_write_bytes
 
 
 def available() -> list[str]:
@@ -31,7 +32,6 @@ def run(args) -> int:  # noqa: ANN001
     figures = module.run(quick=args.quick)
     print_figures(args.name, figures)
     if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(figures, indent=2, default=float))
+        atomic_write_bytes(Path(args.json), json.dumps(figures, indent=2, default=float).encode())
         print(f"wrote {args.json}")
     return 0

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from common.atomic import atomic_write_bytes
 from services.cli.cmd_scan import console
 
 
@@ -67,7 +68,7 @@ def run(args) -> int:  # noqa: ANN001
         report["accuracy"] = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in metrics.items()}
         report["accuracy"]["gt_posed_from_session"] = posed
     report["seconds_total"] = round(time.perf_counter() - t0, 3)
-    (out / "report.json").write_text(json.dumps(report, indent=2, default=float))
+    atomic_write_bytes(out / "report.json", json.dumps(report, indent=2, default=float).encode())
     acc = report.get("accuracy", {})
     console.print(f"model: {model if model.is_file() else 'not built'}; {report['seconds_total']:.1f} s"
                   + (f"; chamfer {acc['chamfer_mm']:.3f} mm, F@2mm {acc.get('fscore_2mm', 0):.3f}" if acc else ""))

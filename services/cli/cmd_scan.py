@@ -1,17 +1,24 @@
 """``objscan scan``: one whole acquisition, with a live progress bar; starts the services it needs.
 
 With no cell running it starts the embedded default (a router on loopback and every service as its own
-process, sim backends) and stops what it started at the end. ``--resume SESSION_DIR`` continues a session
-whose orchestrator was killed or stopped, re-using every frame already captured.
+process, sim backends) and stops what it started at the end. A cell started by ``objscan scan`` belongs to
+that run (a lock file per port, ``cell_lock_path``): a second ``objscan scan`` on the machine does not join
+it (it would share its orchestrator and status key and be stopped when the first exits, issue 17 #13) but
+starts a private cell on a free port, unless ``--port`` names the cell to join. ``--resume SESSION_DIR``
+continues a session whose orchestrator was killed, stopped or failed, re-using every frame already captured.
+The orchestrator this command starts is confined to the session's parent folder and ``--library``.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
+import os
 import queue
 import signal
 import socket
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -25,7 +32,7 @@ from common.codec import decode
 from common.errors import ObjscanError
 from common.launcher import ServiceGroup
 from common.messages import Ok, Request
-from common.zenoh_config import DEFAULT_ROUTER_PORT
+from common.zenoh_config import DEFAULT_ROUTER_PORT, free_tcp_port
 from services.cli.cells import SERVICE_MODULES, add_network_args, cell_specs, remote_session, session_name
 from services.cli.outcome import USAGE, one_line, print_json, report_error
 from services.live import add_live_args, live_requested, open_live_view
@@ -55,7 +62,9 @@ def register(sub) -> None:  # noqa: ANN001
                    help="dynamixel arm: emulate the configured servos (PAPRAS: DYNAMIXEL-P) on a pty, their "
                         "positions driving the twin (hardware in the loop, no hardware)")
     p.add_argument("--robot-config", help="dynamixel arm: robot configuration YAML (default: PAPRAS)")
-    p.add_argument("--port", type=int, default=DEFAULT_ROUTER_PORT, help="router port of the cell")
+    p.add_argument("--port", type=int, default=None,
+                   help=f"router port of the cell to join or start (default: {DEFAULT_ROUTER_PORT}, or a private "
+                        "free port when another objscan scan owns that cell)")
     p.add_argument("--force-first-slip", action="store_true", help="sim: make the first grasp slip")
     p.add_argument("--no-record", action="store_true", help="do not record the session to session.mcap")
     p.add_argument("--library", help="model library folder the model is added to (default: the orchestrator's)")
@@ -73,11 +82,45 @@ def _router_listening(port: int) -> bool:
         return s.connect_ex(("127.0.0.1", port)) == 0
 
 
-def ensure_cell(port: int, backend: str, log_dir: Path, services: list[str] | None = None,
+def cell_lock_path(port: int) -> Path:
+    """The lock an ``objscan scan`` holds on the cell it started on ``port``."""
+    return Path(tempfile.gettempdir()) / f"objscan-cell-{port}.lock"
+
+
+def _claim_cell(port: int) -> int | None:
+    """Take the lock of the cell on ``port`` (a file descriptor), or None when another process holds it."""
+    fd = os.open(cell_lock_path(port), os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        return None
+    return fd
+
+
+def ensure_cell(port: int | None, backend: str, log_dir: Path, services: list[str] | None = None,
                 extra_args: dict[str, list[str]] | None = None) -> ServiceGroup:
-    """Join the cell on ``port``; start the router and whatever of ``services`` (default: all) is missing."""
-    group = ServiceGroup(port, log_dir=log_dir, start_router=not _router_listening(port))
-    if not _router_listening(port):
+    """Join the cell on ``port``; start the router and whatever of ``services`` (default: all) is missing.
+
+    ``port=None``: the default port, unless the cell there was started by another ``objscan scan`` (its lock
+    is held): then a private cell on a free port. A cell this call starts is locked until the group stops.
+    """
+    explicit = port is not None
+    port = port if port is not None else DEFAULT_ROUTER_PORT
+    lock = _claim_cell(port)
+    if lock is None and not explicit and _router_listening(port):
+        port = free_tcp_port()
+        console.print(f"another objscan scan owns the cell on port {DEFAULT_ROUTER_PORT}: starting a private "
+                      f"cell on port {port}")
+        lock = _claim_cell(port)
+    listening = _router_listening(port)
+    if listening and lock is not None:  # someone else's cell (objscan up, compose): join it, do not own it
+        os.close(lock)
+        lock = None
+    group = ServiceGroup(port, log_dir=log_dir, start_router=not listening)
+    if lock is not None:
+        group.cleanups.append(lambda: os.close(lock))
+    if not listening:
         try:
             group.start_router()
         except BaseException:
@@ -126,15 +169,24 @@ def run(args) -> int:  # noqa: ANN001
         except ObjscanError as exc:
             return report_error("scan", exc, as_json=args.json_output)
         try:
-            return _acquire(session, args, target, None, t0)
+            return _acquire(session, args, target, local=False, t0=t0)
         finally:
             session.close()
     session_dir = Path(name).resolve()
-    with ensure_cell(args.port, args.backend, session_dir / "logs", extra_args=arm_args(args)) as group:
-        return _acquire(group.session, args, str(session_dir), session_dir, t0)
+    # the orchestrator started here may write only the session's parent folder and the named library
+    orchestrator_args = ["--sessions", str(session_dir.parent)]
+    if args.library:
+        orchestrator_args += ["--library", str(Path(args.library).resolve())]
+    with ensure_cell(args.port, args.backend, session_dir / "logs",
+                     extra_args={"orchestrator": orchestrator_args, **arm_args(args)}) as group:
+        # a joined cell's orchestrator (objscan up, compose) writes under its own --sessions root: without
+        # --out, name the session and let it place it there (a local absolute path would be refused)
+        joined = "orchestrator" not in group.procs
+        target = session_dir.name if joined and not args.out and not args.resume else str(session_dir)
+        return _acquire(group.session, args, target, local=True, t0=t0)
 
 
-def _acquire(session, args, target: str, session_dir: Path | None, t0: float) -> int:  # noqa: ANN001
+def _acquire(session, args, target: str, *, local: bool, t0: float) -> int:  # noqa: ANN001
     """Start (or resume) the acquisition at ``target`` and follow it to the end."""
     updates: queue.Queue[dict[str, Any]] = queue.Queue()
 
@@ -166,7 +218,8 @@ def _acquire(session, args, target: str, session_dir: Path | None, t0: float) ->
     if live is not None:
         params["live"] = True  # the orchestrator publishes each exchange on its tap (services/live/tap.py)
     reply = request_sync(session, keys.orchestrator(args.robot, "run"), Request(params=params), timeout=30)
-    console.print(f"session: {reply.info['session']}" + (" (resumed)" if reply.info.get("resumed") else ""))
+    mine = str(reply.info["session"])
+    console.print(f"session: {mine}" + (" (resumed)" if reply.info.get("resumed") else ""))
     stop_sent = False
 
     def on_sigint(*_: object) -> None:
@@ -178,19 +231,19 @@ def _acquire(session, args, target: str, session_dir: Path | None, t0: float) ->
 
     signal.signal(signal.SIGINT, on_sigint)
     try:
-        final = _follow(updates, args.views if not args.resume else None)
+        final = _follow(updates, args.views if not args.resume else None, session=mine)
     finally:
         sub.undeclare()
         if live is not None:
             time.sleep(0.5)  # the last exchanges (the model) travel just before the final status
             live.close()
-    shown = session_dir if session_dir is not None else Path(str(reply.info["session"]))
     if args.json_output:
-        return _summary_json(final, shown, time.time() - t0)
-    return _summary(final, shown, time.time() - t0, resume_arg=target if session_dir is None else str(shown))
+        return _summary_json(final, Path(mine), time.time() - t0)
+    return _summary(final, Path(mine), time.time() - t0, resume_arg=mine if local else target)
 
 
-def _follow(updates: queue.Queue[dict[str, Any]], views: int | None) -> dict[str, Any]:
+def _follow(updates: queue.Queue[dict[str, Any]], views: int | None, session: str | None = None) -> dict[str, Any]:
+    """Show the progress of ``session`` (statuses of any other session on the same key are ignored)."""
     last: dict[str, Any] = {}
     columns = (TextColumn("[bold]{task.description}"), BarColumn(),
                TextColumn("{task.completed}/{task.total} views"), TimeElapsedColumn())
@@ -200,6 +253,8 @@ def _follow(updates: queue.Queue[dict[str, Any]], views: int | None) -> dict[str
             try:
                 status = updates.get(timeout=1.0)
             except queue.Empty:
+                continue
+            if session is not None and status.get("session") not in (None, session):
                 continue
             last = status
             progress.update(task, total=status.get("views", views or 12), completed=status.get("views_done", 0),

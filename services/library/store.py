@@ -2,6 +2,7 @@
 
 Layout under ``root``::
 
+    library.json                 the marker: this folder is an objscan library (written when it is created)
     index.sqlite                 one row per model (id, object, date, session, configuration, metadata JSON)
     .lock                        fcntl lock: one writer (or reconciler) at a time, across processes
     entries/<id>/model.ply       the model point cloud (binary PLY, colors and normals when known)
@@ -22,6 +23,12 @@ Crash safety (the rule, tested in tests/library/test_crash_safety.py):
   every entry folder without a row, indexes it if it is complete (``metadata.json`` parses, names this id,
   and every file it lists is there with the recorded size and SHA-256) or removes it if not.
 
+Ownership (issue 17 #2): a folder becomes a library only when it is absent or empty (then ``library.json``
+marks it), or already is one (the marker, or an older library's ``index.sqlite`` with our schema, which
+gets the marker). Anything else is refused with ``not_a_library`` before a single file is touched. The
+tidy-up removes only names the library itself creates (``<entry id>`` and ``<entry id>.<pid>``); anything
+else found under ``entries/``, ``.staging/``, ``.trash/`` is left alone and listed in ``foreign``.
+
 So a crash before the rename leaves nothing (the add never happened); a crash after it leaves an entry that
 the next open indexes (the add happened; only the index lagged); there is never an orphan folder nor a row
 without its files. An exception (rather than a kill) inside ``add`` rolls back at once.
@@ -35,6 +42,7 @@ import hashlib
 import json
 import logging
 import os
+import re
 import secrets
 import shutil
 import sqlite3
@@ -47,6 +55,7 @@ from typing import Any
 import numpy as np
 import open3d as o3d
 
+from common.atomic import atomic_write_bytes, atomic_write_with, fsync_dir
 from common.messages import PointCloud
 from common.session_folder import json_default
 from services.library.descriptors import DescriptorConfig, check_xyz, model_descriptors
@@ -64,7 +73,12 @@ MODEL_FILE = "model.ply"
 MESH_FILE = "mesh.ply"
 DESCRIPTORS_FILE = "descriptors.npz"
 METADATA_FILE = "metadata.json"
+MARKER = "library.json"
 SCHEMA_VERSION = 1
+ENTRY_ID = re.compile(r"^[a-z0-9][a-z0-9-]{0,39}-\d{8}-\d{6}-[0-9a-f]{6}$")
+"""What ``add`` names an entry (slug, local time, 3 random bytes): the only names the tidy-up may remove."""
+WORK_NAME = re.compile(r"^(?P<id>[a-z0-9][a-z0-9-]{0,39}-\d{8}-\d{6}-[0-9a-f]{6})\.\d+$")
+"""``<entry id>.<pid>``: an add (``.staging``) or delete (``.trash``) in progress."""
 
 #: Points where a test (or a curious operator) can stop an ``add`` or ``delete``; see ``fault_hook``.
 ADD_STAGES = ("staging_created", "files_written", "metadata_written", "renamed", "row_inserted", "committed")
@@ -110,6 +124,7 @@ class ReconcileReport:
     dropped_rows: list[str] = field(default_factory=list)
     indexed: list[str] = field(default_factory=list)
     removed_incomplete: list[str] = field(default_factory=list)
+    foreign: list[str] = field(default_factory=list)  # not ours: left where they are
 
     def changed(self) -> bool:
         return any((self.removed_staging, self.removed_trash, self.dropped_rows, self.indexed,
@@ -128,6 +143,7 @@ class ModelLibrary:
         self.root = Path(root)
         self.descriptor_config = descriptor_config or DescriptorConfig()
         self.fault_hook = fault_hook
+        _claim(self.root)
         try:
             for sub in (ENTRIES, STAGING, TRASH):
                 (self.root / sub).mkdir(parents=True, exist_ok=True)
@@ -224,13 +240,9 @@ class ModelLibrary:
                      if (entry.path / name).is_file()]
         out = []
         for src, dst in pairs:
-            dst.parent.mkdir(parents=True, exist_ok=True)
-            tmp = dst.with_name(f".{dst.name}.{os.getpid()}.tmp")
             try:
-                shutil.copyfile(src, tmp)
-                os.replace(tmp, dst)
+                atomic_write_with(dst, lambda tmp, src=src: shutil.copyfile(src, tmp))
             except OSError as exc:
-                Path(tmp).unlink(missing_ok=True)
                 raise LibraryError(f"cannot export to {dst}: {exc}", code="io_error") from None
             out.append(dst)
         return out
@@ -369,22 +381,28 @@ class ModelLibrary:
         rep = ReconcileReport()
         for sub, found in ((STAGING, rep.removed_staging), (TRASH, rep.removed_trash)):
             for d in sorted((self.root / sub).iterdir()):
-                shutil.rmtree(d) if d.is_dir() else d.unlink()
+                if not (d.is_dir() and not d.is_symlink() and WORK_NAME.match(d.name)):
+                    rep.foreign.append(f"{sub}/{d.name}")
+                    continue
+                shutil.rmtree(d)
                 found.append(d.name)
         entries = self.root / ENTRIES
         with self._connect() as db:
             indexed = {r[0] for r in db.execute("SELECT id FROM models")}
-        on_disk = {d.name for d in entries.iterdir() if d.is_dir()}
-        for stray in (p for p in entries.iterdir() if not p.is_dir()):
-            stray.unlink()
-            rep.removed_incomplete.append(stray.name)
+        on_disk = set()
+        for d in entries.iterdir():
+            if d.is_dir() and not d.is_symlink() and ENTRY_ID.match(d.name):
+                on_disk.add(d.name)
+            else:
+                rep.foreign.append(f"{ENTRIES}/{d.name}")
         missing = sorted(i for i in indexed if i not in on_disk or not (entries / i / MODEL_FILE).is_file())
         if missing:
             with self._transaction() as db:
                 db.executemany("DELETE FROM models WHERE id = ?", [(i,) for i in missing])
             rep.dropped_rows.extend(missing)
             for i in missing:
-                shutil.rmtree(entries / i, ignore_errors=True)
+                if i in on_disk:  # an entry folder of ours without its model file
+                    shutil.rmtree(entries / i, ignore_errors=True)
         for name in sorted(on_disk - indexed):
             record = _complete_record(entries / name)
             if record is None:
@@ -398,6 +416,50 @@ class ModelLibrary:
 
 
 # ---------------------------------------------------------------------------------------------- helpers
+
+def _claim(root: Path) -> None:
+    """Make sure ``root`` is (or becomes) a library, refusing any other folder before touching it."""
+    marker = root / MARKER
+    if marker.is_file():
+        try:
+            data = json.loads(marker.read_text())
+        except (OSError, json.JSONDecodeError):
+            data = None
+        version = data.get("objscan_library") if isinstance(data, dict) else None
+        if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+            raise LibraryError(f"{marker} is not an objscan library marker", code="not_a_library",
+                               detail={"path": str(root)})
+        return
+    if root.exists() and not root.is_dir():
+        raise LibraryError(f"{root} is not a folder", code="not_a_library", detail={"path": str(root)})
+    if root.is_dir() and any(root.iterdir()) and not _is_older_library(root):
+        raise LibraryError(f"{root} is not empty and is not an objscan library: refusing to use it (a library "
+                           f"tidies its folders on open)", code="not_a_library",
+                           detail={"path": str(root), "found": sorted(p.name for p in root.iterdir())[:10]})
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(marker, json.dumps({"objscan_library": SCHEMA_VERSION, "created": time.time()}).encode())
+    except OSError as exc:
+        raise LibraryError(f"cannot create library folder {root}: {exc}") from None
+
+
+def _is_older_library(root: Path) -> bool:
+    """A library written before the marker existed: its index holds our table at a schema we know."""
+    index = root / INDEX
+    if not index.is_file():
+        return False
+    try:
+        db = sqlite3.connect(f"file:{index}?mode=ro", uri=True)
+        try:
+            version = int(db.execute("PRAGMA user_version").fetchone()[0])
+            has_table = db.execute("SELECT 1 FROM sqlite_master WHERE type='table' AND name='models'").fetchone()
+        finally:
+            db.close()
+    except sqlite3.Error:
+        return False
+    return 1 <= version <= SCHEMA_VERSION and has_table is not None
+
+
 def _row(record: dict[str, Any]) -> tuple:
     meta = record["metadata"]
     return (record["id"], meta["object_name"], float(meta["created"]), meta.get("session"),
@@ -446,12 +508,7 @@ def _fsync_file(path: Path) -> dict[str, Any]:
     return {"bytes": path.stat().st_size, "sha256": _sha256(path)}
 
 
-def _fsync_dir(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
+_fsync_dir = fsync_dir  # the staging folder's files are written in place: the folder rename is the commit
 
 
 def _write_cloud(path: Path, pcd: o3d.geometry.PointCloud) -> dict[str, Any]:

@@ -37,7 +37,7 @@ from common.api import (
     ViewResult,
 )
 from common.codec import Message
-from common.errors import RemoteError, ServiceUnavailable
+from common.errors import ObjscanError, RemoteError, ServiceUnavailable
 from common.log import event
 from common.messages import JointState, Ok, Plane, PointCloud, Request, RGBDFrame
 
@@ -48,6 +48,7 @@ Tap = Callable[[str, Message | None, Message, float, float], None]
 
 MOVE_TIMEOUT_S = 120.0
 COMPUTE_TIMEOUT_S = 600.0
+POSE_ATTEMPTS = 3  # captures tried for a frame with a camera pose (a real camera asks the arm for it)
 
 
 def _expect(reply: Message, cls: type) -> Any:
@@ -126,9 +127,19 @@ class Cell:
         await self._request(keys.arm(self.robot, "stop"), Request(params={"reset": True}), timeout=5.0)
 
     async def capture(self, width: int, height: int) -> RGBDFrame:
-        reply = await self._request(keys.camera_capture(self.robot), CaptureRequest(width=width, height=height),
-                                    timeout=60.0)
-        return _expect(reply, RGBDFrame)
+        """A frame with a known camera pose. A frame stamped ``pose_source=unknown`` (a real camera whose
+        pose query failed stamps the identity) is captured again, up to ``POSE_ATTEMPTS`` times, then
+        refused with ``no_camera_pose``: it would be registered at the base origin (issue 17 #12)."""
+        for attempt in range(1, POSE_ATTEMPTS + 1):
+            reply = await self._request(keys.camera_capture(self.robot), CaptureRequest(width=width, height=height),
+                                        timeout=60.0)
+            frame = _expect(reply, RGBDFrame)
+            if (frame.meta or {}).get("pose_source") != "unknown":
+                return frame
+            event(log, "frame without a camera pose; capturing again", logging.WARNING, attempt=attempt)
+            await asyncio.sleep(0.5 * attempt)
+        raise ObjscanError(f"the camera could not stamp a pose in {POSE_ATTEMPTS} captures (pose_source=unknown)",
+                           code="no_camera_pose")
 
     async def register_static(self, frames: list[RGBDFrame], view: int, profile: str) -> ViewResult:
         reply = await self._request(keys.REGISTRATION_STATIC, StaticRequest(frames=frames, profile=profile, view=view),

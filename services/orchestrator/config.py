@@ -1,9 +1,72 @@
-"""What one acquisition is asked to do, with defaults that work on the simulated cell."""
+"""What one acquisition is asked to do, with defaults that work on the simulated cell.
+
+Every field is validated when a config is made (``__post_init__``) and ``from_dict`` refuses unknown keys:
+a config arrives over the network in the orchestrator's ``run`` request, and before issue 17 #4
+``views: 3.5`` or NaN left the session ``running`` forever and ``views: 100000000`` blocked the
+orchestrator's event loop. A bad value raises ``ConfigError`` (code ``invalid_config``) naming the field.
+"""
 
 from __future__ import annotations
 
+import math
+import typing
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
+
+from common.errors import InvalidRequest
+
+
+class ConfigError(InvalidRequest):
+    """An acquisition config field has a wrong type or a value out of range; ``detail.field`` names it."""
+
+    code = "invalid_config"
+
+
+def _fail(name: str, why: str, value: Any) -> ConfigError:
+    return ConfigError(f"config field {name!r} {why}, got {value!r}"[:300], detail={"field": name})
+
+
+def _number(name: str, value: Any, lo: float, hi: float, *, integer: bool = False, lo_open: bool = False) -> None:
+    """``value`` is a finite number (an int when ``integer``) in [lo, hi] (or (lo, hi] when ``lo_open``)."""
+    if isinstance(value, bool) or not isinstance(value, int if integer else (int, float)):
+        raise _fail(name, "must be an integer" if integer else "must be a number", value)
+    if not math.isfinite(value):
+        raise _fail(name, "must be finite", value)
+    if value > hi or value < lo or (lo_open and value == lo):
+        raise _fail(name, f"must be in {'(' if lo_open else '['}{lo}, {hi}]", value)
+
+
+def _numbers(name: str, value: Any, lo: float, hi: float, *, length: int | None = None, min_len: int = 1,
+             max_len: int = 64) -> tuple[float, ...]:
+    """A tuple of finite numbers in [lo, hi] (lists from JSON become tuples)."""
+    if not isinstance(value, (list, tuple)):
+        raise _fail(name, "must be a list of numbers", value)
+    if (length is not None and len(value) != length) or not min_len <= len(value) <= max_len:
+        raise _fail(name, f"must hold {length if length is not None else f'{min_len}-{max_len}'} numbers", value)
+    for i, v in enumerate(value):
+        _number(f"{name}[{i}]", v, lo, hi)
+    return tuple(float(v) for v in value)
+
+
+def _text(name: str, value: Any, max_len: int = 512) -> None:
+    if not isinstance(value, str) or not value or len(value) > max_len or "\x00" in value:
+        raise _fail(name, f"must be a non-empty string of at most {max_len} characters", value)
+
+
+def _flag(name: str, value: Any) -> None:
+    if not isinstance(value, bool):
+        raise _fail(name, "must be true or false", value)
+
+
+def _known_keys(cls: type, data: Any, where: str) -> dict[str, Any]:
+    if not isinstance(data, dict):
+        raise _fail(where, "must be a map", data)
+    known = {f.name for f in fields(cls)}
+    unknown = sorted(str(k) for k in data if k not in known)
+    if unknown:
+        raise ConfigError(f"unknown {where} key(s) {unknown[:5]}; known: {sorted(known)}",
+                          detail={"field": where, "unknown": unknown[:20]})
+    return data
 
 
 @dataclass
@@ -20,6 +83,13 @@ class ScanGeometry:
     elevations_deg: tuple[float, ...] = (45.0, 55.0, 38.0)
     look_distance: float = 0.45  # the locate pose: higher and farther, to see the table around the object
     look_elevation_deg: float = 55.0
+
+    def __post_init__(self) -> None:
+        self.azimuth_offsets_deg = _numbers("scan.azimuth_offsets_deg", self.azimuth_offsets_deg, -180.0, 180.0)
+        self.distances = _numbers("scan.distances", self.distances, 0.05, 2.0)
+        self.elevations_deg = _numbers("scan.elevations_deg", self.elevations_deg, -90.0, 90.0)
+        _number("scan.look_distance", self.look_distance, 0.05, 2.0)
+        _number("scan.look_elevation_deg", self.look_elevation_deg, -90.0, 90.0)
 
 
 @dataclass
@@ -38,6 +108,18 @@ class TurnMotion:
     # rolls mid-range, so its branch leaves room to turn either way
     branch_seeds: tuple[tuple[float, ...], ...] = ((0.0, -0.3, -0.9, 0.0, 1.2, 0.0),)
     max_checks: int = 48  # pick-turn-place chains dry-run per turn (each is a few cheap planning requests)
+
+    def __post_init__(self) -> None:
+        for name, hi in (("lift", 0.5), ("clearance", 1.0), ("open_margin", 0.2), ("object_box_margin", 0.2)):
+            _number(f"turn.{name}", getattr(self, name), 0.0, hi)
+        for name in ("speed_scale", "approach_speed_scale"):
+            _number(f"turn.{name}", getattr(self, name), 0.0, 1.0, lo_open=True)
+        _number("turn.gripper_force", self.gripper_force, 0.0, 200.0, lo_open=True)
+        _number("turn.max_checks", self.max_checks, 1, 1000, integer=True)
+        if not isinstance(self.branch_seeds, (list, tuple)) or len(self.branch_seeds) > 16:
+            raise _fail("turn.branch_seeds", "must be a list of at most 16 joint configurations", self.branch_seeds)
+        self.branch_seeds = tuple(_numbers(f"turn.branch_seeds[{i}]", q, -2 * math.pi, 2 * math.pi, length=6)
+                                  for i, q in enumerate(self.branch_seeds))
 
 
 @dataclass
@@ -61,19 +143,43 @@ class AcquisitionConfig:
     scan: ScanGeometry = field(default_factory=ScanGeometry)
     turn: TurnMotion = field(default_factory=TurnMotion)
 
+    MAX_VIEWS: typing.ClassVar[int] = 72  # 5 degrees apart; the paper takes 12
+
+    def __post_init__(self) -> None:
+        _text("object", self.object, 4096)
+        _number("views", self.views, 1, self.MAX_VIEWS, integer=True)
+        _number("turn_deg", self.turn_deg, 0.0, 180.0, lo_open=True)
+        _text("profile", self.profile, 64)
+        _text("static_profile", self.static_profile, 64)
+        _number("seed", self.seed, 0, 2**32 - 1, integer=True)
+        _number("width", self.width, 16, 4096, integer=True)
+        _number("height", self.height, 16, 4096, integer=True)
+        if not isinstance(self.dynamic_config, dict):
+            raise _fail("dynamic_config", "must be a map", self.dynamic_config)
+        _number("max_grasp_attempts", self.max_grasp_attempts, 1, 1000, integer=True)
+        _number("max_rescans", self.max_rescans, 0, 100, integer=True)
+        _flag("force_first_slip", self.force_first_slip)
+        _flag("evaluate", self.evaluate)
+        x, y = _numbers("workspace_center", self.workspace_center, -2.0, 2.0, length=2)
+        self.workspace_center = (x, y)
+        if not isinstance(self.scan, ScanGeometry):
+            raise _fail("scan", "must be a ScanGeometry", self.scan)
+        if not isinstance(self.turn, TurnMotion):
+            raise _fail("turn", "must be a TurnMotion", self.turn)
+
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> AcquisitionConfig:
-        known = {f.name for f in fields(cls)}
-        kwargs = {k: v for k, v in data.items() if k in known and k not in ("scan", "turn")}
-        cfg = cls(**kwargs)
-        if isinstance(data.get("scan"), dict):
-            cfg.scan = ScanGeometry(**{k: tuple(v) if isinstance(v, list) else v for k, v in data["scan"].items()})
-        if isinstance(data.get("turn"), dict):
-            turn = dict(data["turn"])
-            if "branch_seeds" in turn:  # JSON has lists where the dataclass has tuples
-                turn["branch_seeds"] = tuple(tuple(float(x) for x in q) for q in turn["branch_seeds"])
-            cfg.turn = TurnMotion(**{k: v for k, v in turn.items() if k in {f.name for f in fields(TurnMotion)}})
-        return cfg
+        """A validated config from a JSON map (a ``run`` request's or a journal's); raises ``ConfigError``."""
+        data = _known_keys(cls, data, "config")
+        kwargs = {k: v for k, v in data.items() if k not in ("scan", "turn")}
+        try:
+            if "scan" in data:
+                kwargs["scan"] = ScanGeometry(**_known_keys(ScanGeometry, data["scan"], "scan"))
+            if "turn" in data:
+                kwargs["turn"] = TurnMotion(**_known_keys(TurnMotion, data["turn"], "turn"))
+            return cls(**kwargs)
+        except TypeError as exc:  # cannot happen with known keys, but never let a request crash the handler
+            raise ConfigError(f"bad config: {exc}", detail={"field": "config"}) from None

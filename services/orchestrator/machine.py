@@ -12,11 +12,19 @@ Recovery, as a robot on a real table needs it:
 - frontal grasps that all fail to execute fall back to top-down ones;
 - after ``max_rescans`` of one view the arm goes home with the gripper open and the run ends with a reason;
 - an e-stop from anywhere halts the arm at once and parks the machine in ``stopped`` (resumable).
+
+Irreversible steps are journalled before they start and when they end (issue 17 #6, #7): a re-scan writes
+``pending_rescan`` before it moves the old attempt aside; a turn writes ``turn_intent`` before the gripper
+closes (phase ``closing``), when the object is held (``holding``), and its completion (the new view and its
+commanded turn) right after the release, before the retreat. A resume first settles an open intent with what
+the arm reports (``_recover_turn``): a turn that finished physically is recorded, not repeated; an object still
+held is set down before the gripper opens; a turn cut off half-way re-scans the view.
 """
 
 from __future__ import annotations
 
 import asyncio
+import errno
 import logging
 import shutil
 import time
@@ -108,6 +116,9 @@ class Acquisition:
         if self.resumed:
             self.config = AcquisitionConfig.from_dict(self.j["config"])
             self.decide("resumed", state=self.j["state"], view=self.j["view"])
+            if self.j.get("pending_rescan"):  # killed while moving the old attempt aside: finish it
+                self._finish_rescan()
+                self.j["state"] = State.SCAN.value
         self._plan: GraspPlanReply | None = None
         self._step = ""
 
@@ -147,7 +158,8 @@ class Acquisition:
 
     def _go(self, nxt: State) -> None:
         cur = self.state
-        if nxt not in TERMINAL and nxt not in TRANSITIONS.get(cur, set()):
+        # nxt == cur: the step already journalled its own outcome (a turn records the next view at release)
+        if nxt != cur and nxt not in TERMINAL and nxt not in TRANSITIONS.get(cur, set()):
             raise AcquisitionFailed(f"internal error: no transition {cur.value} -> {nxt.value}")
         self.j["state"] = nxt.value
         self._persist()
@@ -159,13 +171,19 @@ class Acquisition:
         after_estop = self.state == State.STOPPED
         if after_estop:  # resuming after an e-stop
             self.j["state"] = self.j.get("stopped_in", State.SCAN.value)
-        if self.state in (State.FAILED, State.DONE):
+        if self.state == State.DONE:  # nothing to do, but say so: a follower waits for a final status
+            self.decide("resume of a finished session: nothing to do")
+            self._persist()
             return self.status()
+        if self.state == State.FAILED:  # the summary says "resume with ...": retry where it failed
+            self._retry_after_failure()
         self.j["status"] = "running"
-        self._persist()
         try:
+            self._persist()
             if after_estop:
                 await self.cell.reset_estop()
+            if self.j.get("turn_intent"):  # before anything opens the gripper: it may hold the object
+                await self._recover_turn()
             await self._prepare_cell()
             while self.state not in TERMINAL:
                 if self.stop_requested.is_set():
@@ -183,10 +201,46 @@ class Acquisition:
             self.decide("stopped", reason="stop requested")
         except ObjscanError as exc:
             await self._fail(exc.code, exc.message)
+        except OSError as exc:  # the session folder cannot be written (disk full, removed, read-only)
+            await self._fail("disk_full" if exc.errno in (errno.ENOSPC, errno.EDQUOT) else "io_error",
+                             f"{type(exc).__name__}: {exc}")
         except Exception as exc:  # a bug must end the session visibly, not leave it 'running' forever
             await self._fail("internal", f"{type(exc).__name__}: {exc}")
-        self._persist()
+        self._persist_final()
         return self.status()
+
+    def _persist_final(self) -> None:
+        """The last write of a run. It must not raise (the failure path raising left journals ``running``):
+        if the folder cannot take it, the session ends ``failed`` and the journal alone is written with the
+        space the store set aside."""
+        try:
+            self._persist()
+            return
+        except OSError as exc:
+            code = "disk_full" if exc.errno in (errno.ENOSPC, errno.EDQUOT) else "io_error"
+            if self.j["status"] != "failed":
+                self.j["error"] = {"code": code, "message": f"{type(exc).__name__}: {exc}", "state": self.j["state"]}
+                self.j["state"], self.j["status"] = State.FAILED.value, "failed"
+            else:
+                self.j["error"]["persist_error"] = f"{type(exc).__name__}: {exc}"
+            self.decide("could not write the session folder", code=code)
+        try:
+            self.store.save_journal(self.j, last_resort=True)
+        except OSError as exc:
+            event(log, "the journal could not be written", logging.ERROR, error=repr(exc))
+        self.on_status(self.status())
+
+    def _retry_after_failure(self) -> None:
+        """Resume a failed session from the state it failed in, with a fresh re-scan budget for that view
+        (the arm was parked, gripper open, when it failed: nothing is held)."""
+        err = self.j.get("error") or {}
+        state = err.get("state") if err.get("state") in {s.value for s in State} - {s.value for s in TERMINAL} \
+            else State.SCAN.value
+        self.j["state"] = state
+        self.j["rescans"].pop(str(self.view), None)
+        self.j.setdefault("previous_errors", []).append(err)
+        self.j["error"] = None
+        self.decide("resumed after failure", state=state, previous=err.get("code"))
 
     async def _fail(self, code: str, message: str) -> None:
         """End the session ``failed`` with the reason in the journal, and park the arm."""
@@ -314,12 +368,25 @@ class Acquisition:
             raise AcquisitionFailed(f"view {k}: giving up after {n - 1} re-scans ({reason})")
         self.j["rescans"][str(k)] = n
         self.j["counters"]["rescans"] += 1
-        src = view_dir(self.store.path, k)
-        if src.exists():  # keep every captured frame: the old attempt moves aside
-            shutil.move(str(src), str(src.with_name(f"{src.name}_attempt{n}")))
+        # intent first: a kill between the move and the next journal write must not lose the view's frames
+        self.j["pending_rescan"] = {"view": k, "attempt": n}
         self.j["scan_sets"].pop(str(k), None)
+        self.store.save_journal(self.j)
+        self._finish_rescan()
         self.decide("re-scan", reason=reason, rescan=n)
         return State.SCAN
+
+    def _finish_rescan(self) -> None:
+        """Move the view's old attempt aside (idempotent: a resume calls it again) and clear the intent."""
+        pending = self.j["pending_rescan"]
+        k, n = int(pending["view"]), int(pending["attempt"])
+        src = view_dir(self.store.path, k)
+        dst = src.with_name(f"{src.name}_attempt{n}")
+        if src.exists() and not dst.exists():  # keep every captured frame: the old attempt moves aside
+            shutil.move(str(src), str(dst))
+        self.j["pending_rescan"] = None
+        self.j["view"] = k
+        self.j["scan_sets"].pop(str(k), None)
 
     async def plan_grasp(self) -> State:
         k = self.view
@@ -407,12 +474,8 @@ class Acquisition:
                             message=exc.message[:200])
                 continue
             self.decide("turned", grasp=gi, pose=seq.name, kind=grasp.kind, direction=seq.direction)
-            self.j["turns_deg"].append(self.j["turns_deg"][k] + seq.direction * cfg.turn_deg)
-            self.j.setdefault("turn_direction", seq.direction)
-            self.j["view"] = k + 1
-            self.j["grasp_mode"] = "auto"
             self._plan = None
-            return State.SCAN
+            return State.SCAN  # already journalled at the release (``_record_turn``)
         self._plan = None
         if self.j.get("grasp_mode", "auto") != "top_down":
             self.j["grasp_mode"] = "top_down"
@@ -554,23 +617,32 @@ class Acquisition:
             self._step = mv.step
             await c.move("linear", target=mv.target, speed=m.approach_speed_scale, contact=mv.contact)
         self._step = "close"
+        held_moves = [mv for mv in moves if mv.phase == "held"]
+        release_T = np.asarray(held_moves[-1].target if held_moves else seq.above_pregrasp, float)
+        self._journal_turn_intent("closing", view=self.view, direction=seq.direction, opening=opening,
+                                  release_T=release_T.tolist(), center=np.asarray(center, float).tolist(),
+                                  height=float(height))
         held = await c.gripper(0.0, m.gripper_force)
         if not held.holding:
             await c.gripper(opening, m.gripper_force)
+            self._journal_turn_intent(None)
             await self._escape(center, height)
             raise GraspFailed(held.reason or "nothing between the pads")
+        self._journal_turn_intent("holding")
         await c.clear_object_box()
         try:
-            for mv in (mv for mv in moves if mv.phase == "held"):
+            for mv in held_moves:
                 # the turn follows the arc in 5-degree chords, each a straight line continuing the branch
                 self._step = f"{mv.step} (holding)"
                 await c.move("linear", target=mv.target, speed=m.approach_speed_scale, contact=True)
         except RemoteError:
             await self._set_down_here(m.lift)
             await c.gripper(opening, m.gripper_force)
+            self._journal_turn_intent(None)
             await self._escape(center, height)
             raise
         await c.gripper(opening, m.gripper_force)
+        self._record_turn(self.view, seq.direction)  # the turn happened: journalled before the retreat
         self._step = "retreat"
         try:
             for mv in (mv for mv in moves if mv.phase == "released"):
@@ -579,6 +651,70 @@ class Acquisition:
             self.decide("retreat failed; escaping", code=exc.code)
             await self._escape(center, height)
         await c.set_object_box(box_c, box_e)
+
+    # ------------------------------------------------------------------------ turn journal (issue 17 #6, #7)
+    def _journal_turn_intent(self, phase: str | None, **fields: Any) -> None:
+        """Write where a turn stands before the next irreversible step: ``closing`` (the gripper is about
+        to close), ``holding`` (the object is held and may be lifted and turned), or ``None`` (over)."""
+        if phase is None:
+            self.j["turn_intent"] = None
+            self.j["holding"] = False
+        else:
+            self.j["turn_intent"] = {**(self.j.get("turn_intent") or {}), **fields, "phase": phase}
+            self.j["holding"] = phase == "holding"
+        self.store.save_journal(self.j)
+
+    def _record_turn(self, k: int, direction: int) -> None:
+        """The object is released where the turn ends: the next view, its commanded turn, one journal write."""
+        self.j["turns_deg"].append(self.j["turns_deg"][k] + direction * self.config.turn_deg)
+        self.j.setdefault("turn_direction", direction)
+        self.j["view"] = k + 1
+        self.j["grasp_mode"] = "auto"
+        self.j["state"] = State.SCAN.value
+        self.j["turn_intent"] = None
+        self.j["holding"] = False
+        self.store.save_journal(self.j)
+
+    async def _recover_turn(self) -> None:
+        """Settle a turn the previous orchestrator left open, from what the arm reports (issue 17 #6, #7).
+
+        - at the planned release pose after the object was held: the turn finished, only its record is
+          missing; release if still closed and record it (never turn again);
+        - elsewhere with the fingers closed on the object: set it down where the hand is, then open (never
+          open first: that drops it);
+        - then, if it was held, the object may be part-turned: re-scan this view; if it was only about to be
+          gripped, the turn is planned again.
+        """
+        intent = self.j["turn_intent"]
+        k, phase = int(intent["view"]), intent.get("phase")
+        opening = float(intent.get("opening", 0.1))
+        state = await self.cell.state()
+        T = np.asarray(state.T_base_gripper, float)
+        R = np.asarray(intent["release_T"], float)
+        angle = np.degrees(np.arccos(np.clip((np.trace(T[:3, :3].T @ R[:3, :3]) - 1) / 2, -1.0, 1.0)))
+        at_release = float(np.linalg.norm(T[:3, 3] - R[:3, 3])) < 0.01 and angle < 5.0
+        closed = float(state.gripper_opening) < opening - 0.005
+        self.decide("recovering an interrupted turn", phase=phase, at_release=bool(at_release),
+                    gripper_closed=bool(closed), gripper_opening=round(float(state.gripper_opening), 4))
+        if phase == "holding" and at_release:
+            if closed:
+                await self.cell.gripper(opening, self.config.turn.gripper_force)
+            self._record_turn(k, int(intent["direction"]))
+            self.decide("turn had finished before the restart: recorded, not repeated", view=k + 1)
+            return
+        if closed:
+            if phase == "holding":  # possibly lifted: lower it back onto the table first
+                await self._set_down_here(self.config.turn.lift)
+            await self.cell.gripper(opening, self.config.turn.gripper_force)
+        self._journal_turn_intent(None)
+        await self._escape(np.asarray(intent["center"], float), float(intent["height"]))
+        self.j["view"] = k
+        if phase == "holding":  # the object may have turned part of the way: this view is no longer true
+            self.j["state"] = State.REGISTER.value  # _rescan's transition to SCAN is from REGISTER
+            self._go(await self._rescan(k, "turn interrupted by a restart"))
+        else:
+            self.j["state"] = State.PLAN_GRASP.value
+        self._persist()
 
     async def _transit_joints(self, q: np.ndarray, speed: float) -> MoveResult:
         """Joint motion to a checked configuration; via the home posture when the direct one is refused."""

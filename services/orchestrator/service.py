@@ -17,7 +17,8 @@ from common import keys
 from common.codec import Message
 from common.errors import InvalidRequest, ObjscanError
 from common.messages import Ok, Request
-from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from common.paths import PathNotAllowed, confine
+from common.runtime import COMMAND_BUDGET, QueryContext, Service, run_service, service_arg_parser, settings_from_args
 from services.orchestrator.cell import Cell
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.machine import Acquisition
@@ -29,16 +30,16 @@ class OrchestratorService(Service):
     name = "orchestrator"
 
     async def setup(self) -> None:
-        self.sessions_root = Path(self.settings.options.get("sessions", "sessions"))
+        self.sessions_root = Path(self.settings.options.get("sessions", "sessions")).resolve()
         self.cell = Cell(self.request, self.robot)
         self.current: Acquisition | None = None
         self.task: asyncio.Task[Any] | None = None
         self.last_status: dict[str, Any] = {"state": "idle", "status": "idle"}
         r = self.robot
         self.status_pub = self.publisher(keys.orchestrator(r, "status"))
-        self.queryable(keys.orchestrator(r, "run"), self.run_acquisition)
-        self.queryable(keys.orchestrator(r, "status"), self.status)
-        self.queryable(keys.orchestrator(r, "stop"), self.stop_acquisition)
+        self.queryable(keys.orchestrator(r, "run"), self.run_acquisition, budget=COMMAND_BUDGET)
+        self.queryable(keys.orchestrator(r, "status"), self.status, budget=COMMAND_BUDGET)
+        self.queryable(keys.orchestrator(r, "stop"), self.stop_acquisition, budget=COMMAND_BUDGET, priority=True)
 
     def _publish(self, status: dict[str, Any]) -> None:
         self.last_status = status
@@ -49,35 +50,51 @@ class OrchestratorService(Service):
             raise ObjscanError("an acquisition is already running", code="busy",
                                detail={"session": str(self.current.store.path) if self.current else None})
         params = msg.params if isinstance(msg, Request) else {}
+        if not isinstance(params, dict):
+            raise InvalidRequest("run parameters must be a map")
+        # every path is checked against this orchestrator's roots before anything is created (issue 17 #3)
+        library = self._library(params)
         if params.get("resume"):
-            path = self._in_root(params["resume"])
-            store = SessionStore(path)
-            if store.load_journal() is None:
-                raise InvalidRequest(f"{path} has no journal.json to resume from")
+            path = confine(params["resume"], self.sessions_root, what="resume")
+            store = SessionStore.open(path)
             config = AcquisitionConfig()
         else:
-            out = params.get("out")
-            default = f"session-{int(asyncio.get_running_loop().time())}"
-            path = self._in_root(out or default)
-            if (path / "journal.json").exists():
-                raise InvalidRequest(f"{path} already holds a session; use resume or another folder")
-            store = SessionStore(path)
-            config = AcquisitionConfig.from_dict(params.get("config", {}))
-        # the finished model goes into the model library (docs/library.md) unless the run says ``library: null``
-        lib = params.get("library", self.settings.options.get("library", "models"))
-        library = Path(lib) if lib else None
-        # session recording (docs/recording.md): on unless the run says ``record: false``
-        self.current, run = recorded_acquisition(
-            lambda cell: Acquisition(cell, store, config, on_status=self._publish, library=library), self.request, path,
-            self.session, self.robot, enabled=params.get("record", True), live=bool(params.get("live", False)))
-        self.task = self.spawn(run)
-        return Ok(info={"session": str(path.resolve()), "resumed": self.current.resumed})
+            out = params.get("out") or f"session-{int(asyncio.get_running_loop().time())}"
+            path = confine(out, self.sessions_root, what="out")
+            config = AcquisitionConfig.from_dict(params.get("config", {}))  # validated before the folder exists
+            store = SessionStore.create(path)
+        store.acquire_lock()  # one orchestrator per session folder (issue 17 #8); released when the run ends
+        try:
+            # session recording (docs/recording.md): on unless the run says ``record: false``
+            self.current, run = recorded_acquisition(
+                lambda cell: Acquisition(cell, store, config, on_status=self._publish, library=library),
+                self.request, path, self.session, self.robot, enabled=params.get("record", True) is not False,
+                live=bool(params.get("live", False)))
+        except BaseException:
+            store.release_lock()
+            raise
+        self.task = self.spawn(self._locked_run(run, store))
+        return Ok(info={"session": str(path), "resumed": self.current.resumed,
+                        "status": self.current.j.get("status")})
 
-    def _in_root(self, path: str) -> Path:
-        """A relative session path is relative to the sessions root (what a remote CLI sends, so sessions
-        land inside the sessions volume); an absolute one is taken as given."""
-        p = Path(str(path))
-        return p if p.is_absolute() else self.sessions_root / p
+    @staticmethod
+    async def _locked_run(run: Any, store: SessionStore) -> Any:
+        try:
+            return await run
+        finally:
+            store.release_lock()
+
+    def _library(self, params: dict[str, Any]) -> Path | None:
+        """The model library for this run: the configured one, or none (``library: null``); nothing else."""
+        configured = self.settings.options.get("library", "models")
+        if "library" not in params:
+            return Path(configured).resolve() if configured else None
+        if not params["library"]:
+            return None
+        if not configured:
+            raise PathNotAllowed("this orchestrator has no model library configured", detail={"what": "library"})
+        return confine(params["library"], configured, what="library", allow_root=True)
+
 
     async def status(self, msg: Message | None, ctx: QueryContext) -> Ok:
         return Ok(info=self.current.status() if self.current else self.last_status)

@@ -7,12 +7,22 @@ keeps:
   with its timing, rewritten atomically after each step: a killed orchestrator resumes from it;
 - ``view_KK/view.json`` + ``view_KK/object.ply``: the registered view (static result);
 - ``view_KK/grasps.json``: the plan and what was tried;
-- ``model.ply`` and ``report.json`` at the end.
+- ``model.ply`` and ``report.json`` at the end;
+- ``.reserve``: 1 MB of disk set aside when the session is created; on a full disk it is released so the
+  journal can still record the failure and its reason (issue 17 #11);
+- ``.session.lock``: held (``fcntl.flock``) by the one orchestrator working on the session (issue 17 #8).
+
+``SessionStore.create`` makes a new session only in an absent or empty folder, ``SessionStore.open``
+only opens a folder that holds a journal: a session never adopts (and a re-scan never moves things in) a
+folder it did not create.
 """
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import json
+import os
 import time
 from pathlib import Path
 from typing import Any
@@ -20,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from common.api import ViewResult
+from common.errors import ObjscanError
 from common.messages import Plane, PointCloud, RGBDFrame
 from common.session_folder import (
     atomic_write_json,
@@ -32,23 +43,119 @@ from common.session_folder import (
 from services.registration.cloud import read_ply, write_ply
 
 JOURNAL = "journal.json"
+LOCK = ".session.lock"
+PRE_SESSION = frozenset({"logs"})  # what may be in a new session's folder: ``objscan scan``'s process logs
+RESERVE = ".reserve"
+RESERVE_BYTES = 1 << 20
+_DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
+
+
+class SessionLocked(ObjscanError):
+    """Another orchestrator (process) is working on this session folder."""
+
+    code = "session_locked"
+
+
+class NotASession(ObjscanError):
+    """The folder is not one this store may use (not empty for a new session, no journal to resume)."""
+
+    code = "not_a_session"
 
 
 class SessionStore:
-    """Reads and writes one acquisition's folder; all writes are atomic (temp file + rename)."""
+    """Reads and writes one acquisition's folder; all writes are atomic (``common.atomic``)."""
 
     def __init__(self, path: Path):
         self.path = Path(path)
         self.path.mkdir(parents=True, exist_ok=True)
+        self._lock_fd: int | None = None
+
+    @classmethod
+    def create(cls, path: Path) -> SessionStore:
+        """A new session in ``path``, which must be absent or an empty folder (checked before creating it);
+        ``logs/`` alone is allowed: ``objscan scan`` starts the cell, logging there, before the session."""
+        path = Path(path)
+        if path.exists() and (not path.is_dir() or any(p.name not in PRE_SESSION for p in path.iterdir())):
+            what = "already holds a session; resume it or choose another folder" if (path / JOURNAL).is_file() \
+                else "is not an empty folder"
+            raise NotASession(f"{path} {what}", detail={"path": str(path)})
+        store = cls(path)
+        store.reserve_space()
+        return store
+
+    @classmethod
+    def open(cls, path: Path) -> SessionStore:
+        """An existing session (``path`` holds ``journal.json``), to resume it."""
+        path = Path(path)
+        if not (path / JOURNAL).is_file():
+            raise NotASession(f"{path} has no {JOURNAL} to resume from", detail={"path": str(path)})
+        store = cls(path)
+        store.reserve_space()
+        return store
+
+    def reserve_space(self, nbytes: int = RESERVE_BYTES) -> bool:
+        """Set ``nbytes`` of disk aside (really allocated) for the last journal write; False if the disk is
+        already too full (then the failure journal may not fit: still tried)."""
+        p = self.path / RESERVE
+        if p.is_file() and p.stat().st_size >= nbytes:
+            return True
+        try:
+            fd = os.open(p, os.O_WRONLY | os.O_CREAT, 0o644)
+            try:
+                os.posix_fallocate(fd, 0, nbytes)
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+            return True
+        except OSError:
+            p.unlink(missing_ok=True)
+            return False
+
+    # ----------------------------------------------------------------------------------- lock
+    def acquire_lock(self) -> SessionStore:
+        """Take the session's lock for this process, or raise ``SessionLocked`` at once (never waits).
+
+        ``flock`` locks belong to the open file: they exclude other processes *and* another store of the
+        same folder in this process, and the kernel drops them when the holder dies (a killed orchestrator
+        never leaves a stale lock).
+        """
+        if self._lock_fd is not None:
+            return self
+        fd = os.open(self.path / LOCK, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise SessionLocked(f"another orchestrator is working on {self.path}",
+                                detail={"path": str(self.path)}) from None
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        self._lock_fd = fd
+        return self
+
+    def release_lock(self) -> None:
+        if self._lock_fd is not None:
+            fd, self._lock_fd = self._lock_fd, None
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
 
     # ----------------------------------------------------------------------------------- journal
     def load_journal(self) -> dict[str, Any] | None:
         p = self.path / JOURNAL
         return json.loads(p.read_text()) if p.is_file() else None
 
-    def save_journal(self, journal: dict[str, Any]) -> None:
+    def save_journal(self, journal: dict[str, Any], *, last_resort: bool = False) -> None:
+        """Write the journal atomically. ``last_resort`` (the failure record): on a full disk, release the
+        reserve and try once more, so the session still ends ``failed`` with its reason on disk."""
         journal["updated"] = time.time()
-        atomic_write_json(self.path / JOURNAL, journal)
+        try:
+            atomic_write_json(self.path / JOURNAL, journal)
+        except OSError as exc:
+            reserve = self.path / RESERVE
+            if not (last_resort and exc.errno in _DISK_FULL and reserve.exists()):
+                raise
+            reserve.unlink()
+            atomic_write_json(self.path / JOURNAL, journal)
 
     def write_session_info(self, config: dict[str, Any], views_done: int, turns_deg: list[float],
                            extra: dict[str, Any] | None = None) -> None:

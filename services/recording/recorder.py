@@ -148,6 +148,7 @@ class SessionRecorder:
         self.counts: dict[str, int] = {}
         self.dropped = 0
         self.errors: list[str] = []
+        self.io_error: OSError | None = None  # the first write failure (disk full): the recording ended there
         self._channels: dict[str, int] = {}
         self._schemas: dict[str, int] = {}
         self._sequence = 0
@@ -171,7 +172,13 @@ class SessionRecorder:
 
     # ------------------------------------------------------------------------------ producers
     def tap(self, key: str, request: Message | None, reply: Message, t_sent: float, t_received: float) -> None:
-        """Record one request and its reply (the ``Cell.tap`` signature). Never blocks for long."""
+        """Record one request and its reply (the ``Cell.tap`` signature). Never blocks for long.
+
+        Raises ``RecordingError`` (code ``recording_failed``) once the file could not be written: a session
+        that is recorded must not go on unrecorded without saying so (issue 17 #11)."""
+        if self.io_error is not None:
+            raise RecordingError(f"the session recording {self.path.name} could not be written: {self.io_error}",
+                                 code="recording_failed", detail={"path": str(self.path)})
         if not self._closed:
             self._queue.put(("exchange", key, request, reply, t_sent, t_received))
 
@@ -253,11 +260,21 @@ class SessionRecorder:
                 item = self._queue.get(timeout=timeout)
             except queue.Empty:
                 item = None
+            if self.io_error is not None:  # the file is broken: drain the queue, keep nothing
+                if item is not None and item[0] == "stop":
+                    self._file.close()
+                    return
+                continue
             try:
                 if item is None:
                     pass
                 elif item[0] == "stop":
-                    self._finish(item[1])
+                    try:
+                        self._finish(item[1])
+                    except OSError as exc:
+                        self.io_error = exc
+                        self.errors.append(repr(exc))
+                        event(log, "recording could not be closed", logging.ERROR, error=repr(exc))
                     return
                 elif item[0] == "exchange":
                     self._write_exchange(*item[1:])
@@ -274,6 +291,10 @@ class SessionRecorder:
                 if dirty and time.monotonic() - last_flush >= self.config.flush_interval_s:
                     self._writer.flush()
                     last_flush, dirty = time.monotonic(), False
+            except OSError as exc:  # disk full, file gone: the recording ends here, and says so (tap raises)
+                self.io_error = exc
+                self.errors.append(repr(exc))
+                event(log, "recording write failed; recording stopped", logging.ERROR, error=repr(exc))
             except Exception as exc:  # a bad item must not end the recording
                 self.errors.append(repr(exc))
                 event(log, "recording item failed", logging.ERROR, error=repr(exc))

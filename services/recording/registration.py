@@ -23,6 +23,7 @@ import numpy as np
 
 from common import keys
 from common.api import DynamicRequest, ModelResult, StaticRequest, ViewResult
+from common.atomic import atomic_write_bytes
 from common.messages import PointCloud, RGBDFrame
 from common.session_folder import read_scan, read_session, write_scan
 from services.recording.compare import compare_models
@@ -164,7 +165,7 @@ def replay_registration(source: str | Path, out_dir: str | Path, *, static_profi
             report["comparison"] = compare_models(recorded, replayed, tolerance_mm)
     timings["total"] = round(time.perf_counter() - t0, 3)
     report["timings_s"] = timings
-    (out / "replay.json").write_text(json.dumps(report, indent=1, default=str))
+    atomic_write_bytes(out / "replay.json", json.dumps(report, indent=1, default=str).encode())
     return report
 
 

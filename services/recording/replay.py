@@ -19,6 +19,7 @@ from typing import Any
 
 from common import keys
 from common.api import ModelResult
+from common.atomic import atomic_write_bytes
 from common.client import request_sync
 from common.errors import ObjscanError
 from common.launcher import ProcessSpec, ServiceGroup
@@ -114,5 +115,5 @@ def replay_session(source: str | Path, out_dir: str | Path, *, atol: float = 1e-
         finally:
             tmp.unlink(missing_ok=True)
     report["model"] = str(model_path) if model_path.is_file() else None
-    (out / "replay.json").write_text(json.dumps(report, indent=1, default=str))
+    atomic_write_bytes(out / "replay.json", json.dumps(report, indent=1, default=str).encode())
     return report

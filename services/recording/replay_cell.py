@@ -31,7 +31,7 @@ from common import keys
 from common.codec import Message
 from common.errors import ObjscanError
 from common.messages import Error, JointState, Ok
-from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from common.runtime import COMMAND_BUDGET, QueryContext, Service, run_service, service_arg_parser, settings_from_args
 from services.recording.errors import ReplayDiverged, ReplayExhausted
 from services.recording.reader import Exchange, read_recording
 
@@ -160,7 +160,7 @@ class ReplayCellService(Service):
         else:
             for op in ("move", "gripper", "scene"):
                 self.queryable(keys.arm(r, op), self._answer)
-            self.queryable(keys.arm(r, "stop"), self._stop)
+            self.queryable(keys.arm(r, "stop"), self._stop, budget=COMMAND_BUDGET, priority=True)
             self.queryable(keys.arm(r, "state"), self._state)
             self.state_pub = self.publisher(keys.arm(r, "state"), block=False)
         self.last_state: JointState | None = None

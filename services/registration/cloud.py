@@ -75,6 +75,9 @@ def check_frame(frame: RGBDFrame) -> None:
         raise CloudError("intrinsics must be finite with positive focal lengths", code="bad_value")
     if not (np.isfinite(frame.depth_scale) and frame.depth_scale > 0):
         raise CloudError("depth_scale must be positive", code="bad_value", detail={"depth_scale": frame.depth_scale})
+    if (frame.meta or {}).get("pose_source") == "unknown":  # issue 17 #12: the identity stood in for a pose
+        raise CloudError("frame has no camera pose (pose_source=unknown: the pose query failed when it was "
+                         "captured); it cannot be placed in base", code="no_camera_pose")
     T = np.asarray(frame.T_base_camera, dtype=np.float64)
     if T.shape != (4, 4) or not np.isfinite(T).all():
         raise CloudError("T_base_camera must be a finite 4x4 matrix", code="bad_value")
@@ -237,14 +240,15 @@ def transform_cloud(cloud: PointCloud, T: np.ndarray, frame: str | None = None) 
 
 def write_ply(path: Path | str, cloud: PointCloud | o3d.geometry.PointCloud, *, binary: bool = True) -> Path:
     """Write xyz (+ rgb, + normals when present) to a PLY file; parent folders are created."""
+    from common.atomic import atomic_path
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     pcd = cloud if isinstance(cloud, o3d.geometry.PointCloud) else to_o3d(cloud)
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    if not o3d.io.write_point_cloud(str(tmp), pcd, write_ascii=not binary):
-        tmp.unlink(missing_ok=True)
-        raise CloudError(f"could not write {path}", code="io_error")
-    tmp.replace(path)  # a reader never sees a half-written file
+    # unique temporary name, fsync, rename, folder fsync: a reader never sees a half-written file, two
+    # writers never share a temporary file, and a failed write (disk full) raises instead of renaming
+    with atomic_path(path) as tmp:
+        if not o3d.io.write_point_cloud(str(tmp), pcd, write_ascii=not binary) or tmp.stat().st_size == 0:
+            raise CloudError(f"could not write {path}", code="io_error")
     return path
 
 

@@ -24,11 +24,16 @@ ROBOT = keys.DEFAULT_ROBOT
 VIEWS = 4
 
 
+def orchestrator_args(tmp_path_factory) -> list[str]:  # noqa: ANN001
+    return ["--sessions", str(tmp_path_factory.getbasetemp())]
+
+
 @pytest.fixture(scope="module")
 def cell(tmp_path_factory):
     logs = tmp_path_factory.mktemp("cell-logs")
     with ServiceGroup(log_dir=logs) as group:
-        group.launch(cell_specs(), timeout=240)
+        # the orchestrator may write sessions only under its root: every test's tmp_path is under the base temp
+        group.launch(cell_specs(extra_args={"orchestrator": orchestrator_args(tmp_path_factory)}), timeout=240)
         yield group
 
 
@@ -94,7 +99,7 @@ def test_first_grasp_slips_and_the_acquisition_still_completes(cell, tmp_path):
 
 
 @pytest.mark.slow
-def test_orchestrator_killed_mid_view_2_resumes_and_loses_nothing(cell, tmp_path):
+def test_orchestrator_killed_mid_view_2_resumes_and_loses_nothing(cell, tmp_path, tmp_path_factory):
     reference = tmp_path / "reference"
     start(cell, reference)
     assert wait_until(cell, finished)["status"] == "done"
@@ -104,7 +109,7 @@ def test_orchestrator_killed_mid_view_2_resumes_and_loses_nothing(cell, tmp_path
     wait_until(cell, lambda s: s.get("view") == 2 and s.get("state") in ("scan", "register"), timeout=900)
     captured_before = {str(p) for p in scan_dirs(out)}
     cell.kill("orchestrator")
-    cell.start(ProcessSpec("services.orchestrator", service="orchestrator"))
+    cell.start(ProcessSpec("services.orchestrator", orchestrator_args(tmp_path_factory), service="orchestrator"))
     cell.wait_alive(["orchestrator"], timeout=120)
     request_sync(cell.session, keys.orchestrator(ROBOT, "run"), Request(params={"resume": str(out)}), timeout=30)
     final = wait_until(cell, finished)

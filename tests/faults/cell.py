@@ -217,7 +217,7 @@ def _frame_hash(scan: Path) -> str:
 def start_cell(root: Path, registration_workers: int = 2) -> tuple[ServiceGroup, dict[str, ProcessSpec]]:
     # the twin's state file (services/sim/state_file.py) in the test's folder, not the user's state dir
     group = ServiceGroup(log_dir=root / "logs", extra_env={"OBJSCAN_STATE_DIR": str(root / "state")})
-    specs = cell_processes(root / "sessions", registration_workers)
+    specs = cell_processes(root, registration_workers)  # sessions go under root (the orchestrator's root)
     try:
         group.launch(specs, timeout=300)
     except BaseException:

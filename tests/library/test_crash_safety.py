@@ -163,9 +163,10 @@ def test_row_whose_files_vanished_is_dropped(tmp_path):
 def test_stray_staging_and_trash_folders_are_cleared(tmp_path):
     root = tmp_path / "lib"
     ModelLibrary(root)
-    (root / STAGING / "x.123").mkdir()
-    (root / STAGING / "x.123" / MODEL_FILE).write_bytes(np.zeros(10).tobytes())
-    (root / TRASH / "y.456").mkdir()
+    x, y = "x-20261124-101010-abcdef.123", "y-20261124-101011-012345.456"  # names an add/delete makes
+    (root / STAGING / x).mkdir()
+    (root / STAGING / x / MODEL_FILE).write_bytes(np.zeros(10).tobytes())
+    (root / TRASH / y).mkdir()
     lib = ModelLibrary(root)
-    assert lib.last_reconcile.removed_staging == ["x.123"] and lib.last_reconcile.removed_trash == ["y.456"]
+    assert lib.last_reconcile.removed_staging == [x] and lib.last_reconcile.removed_trash == [y]
     assert_consistent(lib)

@@ -38,7 +38,7 @@ def _status(group: ServiceGroup) -> dict:
 def test_killed_orchestrator_recording_is_readable_and_resume_appends_a_part(tmp_path):
     session = tmp_path / "session"
     with ServiceGroup(log_dir=tmp_path / "logs", robot=ROBOT) as group:
-        group.launch(cell_specs(), timeout=240)
+        group.launch(cell_specs(extra_args={"orchestrator": ["--sessions", str(tmp_path)]}), timeout=240)
         request_sync(group.session, keys.orchestrator(ROBOT, "run"),
                      Request(params={"out": str(session), "config": CONFIG}), timeout=30)
         deadline = time.monotonic() + 600
@@ -63,7 +63,7 @@ def test_killed_orchestrator_recording_is_readable_and_resume_appends_a_part(tmp
             assert any(np.array_equal(f.depth, r.depth) and np.array_equal(f.color, r.color) for r in frames), (v, j)
         digest = hashlib.sha256(first.read_bytes()).hexdigest()
 
-        spec = next(s for s in cell_specs(["orchestrator"]))
+        spec = next(s for s in cell_specs(["orchestrator"], extra_args={"orchestrator": ["--sessions", str(tmp_path)]}))
         group.start(spec)
         group.wait_alive(["orchestrator"], timeout=120)
         request_sync(group.session, keys.orchestrator(ROBOT, "run"), Request(params={"resume": str(session)}),

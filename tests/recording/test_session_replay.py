@@ -57,7 +57,7 @@ def recorded(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("recorded")
     session = root / "session"
     with ServiceGroup(log_dir=root / "logs", robot=ROBOT) as group:
-        group.launch(cell_specs(), timeout=240)
+        group.launch(cell_specs(extra_args={"orchestrator": ["--sessions", str(root)]}), timeout=240)
         request_sync(group.session, keys.orchestrator(ROBOT, "run"),
                      Request(params={"out": str(session), "config": CONFIG}), timeout=30)
         status = _wait_status(group, 900)

@@ -53,7 +53,7 @@ class TlsCell:
         self.group.wait_listening("router", timeout)
 
     def launch(self, services: list[str], timeout: float = 120.0) -> None:
-        specs = cell_specs(services)
+        specs = cell_specs(services, extra_args={"orchestrator": ["--sessions", str(self.root)]})
         for spec in specs:
             spec.env.update(identity_env(self.certs, spec.service or spec.module))
         self.group.launch(specs, timeout=timeout)
