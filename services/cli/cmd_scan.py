@@ -40,6 +40,9 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--profile", default="robot-turned", choices=["ideal", "hand-turned", "robot-turned"],
                    help="sim error profile (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--physics", default="mujoco", choices=["mujoco", "geometric"],
+                   help="sim: grasp, lift and set-down by MuJoCo contact physics, or the fast geometric checker "
+                        "with drawn errors (default: %(default)s)")
     p.add_argument("--width", type=int, default=640)
     p.add_argument("--height", type=int, default=480)
     p.add_argument("--out", help="session folder (default: sessions/<object>-<time>)")
@@ -107,6 +110,7 @@ def run(args) -> int:  # noqa: ANN001
         else:
             params = {"out": str(session_dir), "config": {
                 "object": args.object, "views": args.views, "profile": args.profile, "seed": args.seed,
+                "physics": args.physics,
                 "width": args.width, "height": args.height, "force_first_slip": args.force_first_slip}}
             params["record"] = not args.no_record
             if args.library:

@@ -48,6 +48,7 @@ class AcquisitionConfig:
     views: int = 12
     turn_deg: float = 30.0
     profile: str = "robot-turned"
+    physics: str = "geometric"  # sim: "mujoco" (contact physics) or "geometric" (fast checker); the CLI picks mujoco
     seed: int = 0
     width: int = 640
     height: int = 480

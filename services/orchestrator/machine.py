@@ -200,7 +200,7 @@ class Acquisition:
             try:
                 x, y = self.config.workspace_center
                 await self.cell.sim("reset", object=self.config.object, profile=self.config.profile,
-                                    seed=self.config.seed, x=float(x), y=float(y))
+                                    seed=self.config.seed, x=float(x), y=float(y), physics=self.config.physics)
                 self.j["simulated"] = True
                 if self.config.force_first_slip:
                     await self.cell.sim("force_slip")
