@@ -327,8 +327,13 @@ class PhysicsScene:
             T_go = invert(T_hand) @ T_obj
             turn = _rotation_deg(invert(T_start) @ T_go)
             if rise < 0.75 * c.lift_height or len(self._pads_touching(d)) < 2:
-                self._run(d, 0.8)  # let it come down and rest where it lands
-                return PhysicsGrasp(False, "slip", self._width(d), None, self._object_pose(d), turn, None,
+                width = self._width(d)
+                # what is left hanging or wedged comes down where it lands once the pads open (the
+                # orchestrator's next step after a failed grasp)
+                w0, half_open = d.ctrl[0], self.spec.max_opening / 2
+                self._run(d, c.open_time, ctrl=lambda s: w0 + (half_open - w0) * s)
+                self._run(d, 0.8)
+                return PhysicsGrasp(False, "slip", width, None, self._object_pose(d), turn, None,
                                     f"the object slid out of the pads while lifting (rose {rise * 1000:.0f} of "
                                     f"{c.lift_height * 1000:.0f} mm)")
             pads = tuple(float(d.qpos[a]) for a in self._pad_q)
@@ -373,6 +378,13 @@ class PhysicsScene:
                 back[0, 3] = -c.retreat * _smooth(s)
                 return Tg @ back
             self._run(d, 0.3, hand=retreat, watch=watch)
+            away = retreat(1.0)
+
+            def up(s: float) -> np.ndarray:  # and up, clear of anything leaning on the pads
+                T = away.copy()
+                T[2, 3] += 0.15 * _smooth(s)
+                return T
+            self._run(d, 0.3, hand=up, watch=watch)
             settled = False
             for _ in range(int(np.ceil(c.settle_time / 0.1))):
                 self._run(d, 0.1, watch=watch)
