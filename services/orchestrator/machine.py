@@ -43,6 +43,7 @@ from services.orchestrator.planning import (
     turn_sequences,
 )
 from services.orchestrator.store import SessionStore
+from services.orchestrator.topple import topple_reason
 
 log = logging.getLogger("objscan.orchestrator")
 
@@ -299,6 +300,11 @@ class Acquisition:
             except RemoteError as exc:
                 self.decide("static registration failed", code=exc.code, message=exc.message)
                 return await self._rescan(k, f"registration failed: {exc.code}")
+            reason = (topple_reason(self.j["heights"].get(str(k - 1)), float(result.height),
+                                    self.config.topple_height_tol_m, self.config.topple_height_rel, k)
+                      if k > 0 else None)
+            if reason is not None:
+                return self._restart_after_topple(k, reason, result)
             self.store.save_view(result)
             self._remember_object(k, result)
             self.decide("view registered", points=len(result.cloud),
@@ -306,6 +312,28 @@ class Acquisition:
         if k >= self.config.views - 1:
             return State.MODEL
         return State.PLAN_GRASP
+
+    def _restart_after_topple(self, k: int, reason: str, result: ViewResult) -> State:
+        """The object toppled before view ``k``: set views 0..k aside (kept on disk) and scan again from
+        view 0 where it now lies, so no view of the old resting pose is fused with the new one."""
+        n = int(self.j.get("topple_restarts", 0)) + 1
+        if n > self.config.max_topple_restarts:
+            raise AcquisitionFailed(f"view {k}: {reason}; it toppled again after {n - 1} restart(s) of the views: "
+                                    "giving up (the object does not stay standing after a set-down)",
+                                    detail={"view": k, "restarts": n - 1})
+        self.j["topple_restarts"] = n
+        self.j["counters"]["topple_restarts"] = n
+        for v in range(k + 1):
+            src = view_dir(self.store.path, v)
+            if src.exists():
+                shutil.move(str(src), str(src.with_name(f"{src.name}_toppled{n}")))
+        self.j.update(view=0, turns_deg=[0.0], scan_sets={}, rescans={}, grasp_mode="auto", failed_grasps={},
+                      centers={}, heights={})
+        self.j.pop("turn_direction", None)
+        self._remember_object(-1, result)
+        self._plan = None
+        self.decide("object toppled: restarting the views from where it lies", reason=reason, restart=n)
+        return State.SCAN
 
     async def _rescan(self, k: int, reason: str) -> State:
         n = int(self.j["rescans"].get(str(k), 0)) + 1
