@@ -34,6 +34,7 @@ from common.messages import Grasp
 from common.session_folder import view_dir
 from services.orchestrator.cell import Cell
 from services.orchestrator.config import AcquisitionConfig
+from services.orchestrator.limits import name_limit
 from services.orchestrator.planning import (
     TurnPoses,
     look_pose,
@@ -313,6 +314,10 @@ class Acquisition:
             return State.MODEL
         return State.PLAN_GRASP
 
+    def _limits(self, k: int) -> dict[str, Any]:
+        """What stood in the way at view ``k`` (planner rejections, dry-run codes, grasp failures)."""
+        return self.j.setdefault("limits", {}).setdefault(str(k), {})
+
     def _restart_after_topple(self, k: int, reason: str, result: ViewResult) -> State:
         """The object toppled before view ``k``: set views 0..k aside (kept on disk) and scan again from
         view 0 where it now lies, so no view of the old resting pose is fused with the new one."""
@@ -338,7 +343,10 @@ class Acquisition:
     async def _rescan(self, k: int, reason: str) -> State:
         n = int(self.j["rescans"].get(str(k), 0)) + 1
         if n > self.config.max_rescans:
-            raise AcquisitionFailed(f"view {k}: giving up after {n - 1} re-scans ({reason})")
+            lim = self.j.get("limits", {}).get(str(k), {})
+            limit = name_limit(lim.get("planner", {}), lim.get("dry_run", []), lim.get("grasp", []))
+            raise AcquisitionFailed(f"view {k}: giving up after {n - 1} re-scans ({reason}); limit: {limit}",
+                                    detail={"view": k, "limit": limit.split(":")[0]})
         self.j["rescans"][str(k)] = n
         self.j["counters"]["rescans"] += 1
         src = view_dir(self.store.path, k)
@@ -358,6 +366,10 @@ class Acquisition:
             "grasps": [{"kind": g.kind, "rank": g.rank, "width": g.width, "contacts": np.asarray(g.contacts).tolist(),
                         "metrics": g.metrics} for g in plan.grasps]})
         self.decide("grasps planned", mode=mode, n=len(plan.grasps), explanation=plan.explanation)
+        counts = (plan.rejections or {}).get("counts", {}) if isinstance(plan.rejections, dict) else {}
+        planner = self._limits(k).setdefault("planner", {})
+        for reason, count in counts.items():
+            planner[reason] = planner.get(reason, 0) + int(count)
         if not plan.grasps:
             if mode == "auto":
                 self.j["grasp_mode"] = "top_down"
@@ -414,6 +426,7 @@ class Acquisition:
                 q_start = await self._check_turn(seq, view.center)
             except RemoteError as exc:
                 failures.append(f"{seq.name}:{exc.code}")
+                self._limits(k).setdefault("dry_run", []).append(exc.code)
                 self.decide("grasp pose not executable", grasp=gi, pose=seq.name, step=self._step, code=exc.code,
                             message=exc.message[:200], dry_run=True)
                 continue
@@ -424,6 +437,7 @@ class Acquisition:
             except GraspFailed as exc:
                 self.j["counters"]["slips"] += 1
                 self.j["failed_grasps"].setdefault(str(k), []).append(signature)
+                self._limits(k).setdefault("grasp", []).append(exc.message.split(":")[0][:40])
                 self.decide("grasp failed", grasp=gi, pose=seq.name, reason=exc.message)
                 self._plan = None
                 self.j["grasp_mode"] = "auto"
