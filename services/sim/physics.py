@@ -58,15 +58,15 @@ class PhysicsConfig:
     settle_time: float = 1.5  # s at most for the object to come to rest
     friction_jitter: float = 0.1  # relative uniform spread of every friction coefficient, drawn per seed
     mass_jitter: float = 0.1  # relative uniform spread of the object's mass, drawn per seed
-    collision: str = "coacd"  # "coacd" (convex decomposition, cached) or "hull" (one convex hull)
+    collision: str = "auto"  # "auto" (hull if nearly convex, else coacd), "coacd" (decomposition, cached), "hull"
     topple_tilt_deg: float = 30.0  # an object resting tilted more than this has toppled
 
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
             if f.name == "collision":
-                if v not in ("coacd", "hull"):
-                    raise SimInputError(f"collision must be 'coacd' or 'hull', got {v!r}", code="bad_value")
+                if v not in ("auto", "coacd", "hull"):
+                    raise SimInputError(f"collision must be 'auto', 'coacd' or 'hull', got {v!r}", code="bad_value")
                 continue
             if not np.isfinite(v) or v < 0:
                 raise SimInputError(f"physics {f.name} must be a finite non-negative number, got {v!r}",

@@ -147,3 +147,26 @@ def test_bad_physics_settings_are_typed_errors(tmp_path):
         PhysicsConfig(grip_force=-1.0)
     with pytest.raises(SimInputError):
         PhysicsConfig(collision="voxels")
+
+
+@pytest.mark.slow  # coacd on the L block: seconds idle, over a minute on this shared machine
+def test_collision_parts_decompose_only_what_is_not_convex(tmp_path):
+    import open3d as o3d
+
+    from services.sim.collision_shapes import convex_parts, solidity
+
+    box = _box(tmp_path, (0.08, 0.04, 0.10), "slab")
+    assert solidity(box.vertices, box.triangles) == pytest.approx(1.0, abs=1e-6)
+    parts, method = convex_parts(box.vertices, box.triangles)
+    assert method == "hull" and len(parts) == 1
+    # an L-shaped block (two boxes) is far from convex: decomposed into more than one part, then cached
+    a = o3d.geometry.TriangleMesh.create_box(0.10, 0.03, 0.03)
+    b = o3d.geometry.TriangleMesh.create_box(0.03, 0.03, 0.10)
+    ell = a + b
+    ell.merge_close_vertices(1e-9)
+    v, t = np.asarray(ell.vertices), np.asarray(ell.triangles)
+    if solidity(v, t) >= 0.8:
+        pytest.skip("mesh union not closed enough to measure")
+    parts, method = convex_parts(v, t)
+    assert method == "coacd" and len(parts) >= 2
+    assert list((tmp_path / "cache" / "collision").glob("coacd-*.npz"))
