@@ -27,6 +27,7 @@ the table and the object), the contact by physics.
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import replace
 from typing import Any
@@ -167,6 +168,8 @@ def run(quick: bool = False) -> dict[str, Any]:
                 if "turn" in results[pname]:
                     turns[method].append(results[pname]["turn"])
             per_pose[name][method] = results
+            print(f"grasping: {name} {method}: {sum(r['held'] for r in results.values())}/{len(results)} held "
+                  f"({time.time() - t0:.0f} s)", file=sys.stderr, flush=True)
             tables[t_all].append(_row(name, list(results.values())))
             if method == "frontal":
                 tables[t_tall].append(_row(name, [r for p, r in results.items()
