@@ -45,6 +45,30 @@ def acquire(out: Path, *, object_name: str, views: int, profile: str, seed: int,
     return score_session(out, seconds=seconds, status=s.get("status"), error=s.get("last_error"))
 
 
+def true_turns(out: Path) -> dict[str, Any]:
+    """The turns the object really made between consecutive views (sim ground truth in each view's first
+    scan): |yaw change| per step, and the largest tilt from upright seen (a topple shows here)."""
+    import numpy as np
+
+    from services.sim.world import yaw_of
+
+    poses = []
+    for k in range(100):
+        meta = out / f"view_{k:02d}" / "scan_0" / "meta.json"
+        if not meta.is_file():
+            break
+        T = json.loads(meta.read_text()).get("T_base_object_true")
+        if T is None:
+            return {}
+        poses.append(np.asarray(T, dtype=float).reshape(4, 4))
+    if len(poses) < 2:
+        return {}
+    steps = [abs((np.degrees(yaw_of(b) - yaw_of(a)) + 180.0) % 360.0 - 180.0) for a, b in zip(poses, poses[1:])]
+    tilt = max(float(np.degrees(np.arccos(np.clip(T[2, 2], -1, 1)))) for T in poses)
+    return {"turn_deg_mean": round(float(np.mean(steps)), 2), "turn_deg_min": round(float(min(steps)), 2),
+            "turn_deg_max": round(float(max(steps)), 2), "max_tilt_deg": round(tilt, 2)}
+
+
 def score_session(out: Path, *, seconds: float | None = None, status: str | None = None,
                   error: dict | None = None) -> dict[str, Any]:
     """The figures of one finished session folder (its report.json and journal.json)."""
@@ -63,6 +87,7 @@ def score_session(out: Path, *, seconds: float | None = None, status: str | None
             **{k: acc.get(k) for k in ("chamfer_mm", "accuracy_mm", "completeness_mm", "fscore_2mm", "fscore_5mm")},
             "unaligned_chamfer_mm": acc.get("unaligned", {}).get("chamfer_mm"),
             "configuration": report.get("model_figures", {}).get("configuration"),
+            "true_turns": true_turns(out),
             "timings_s": journal.get("timings_s"), "session": str(out), "error": error or journal.get("error")}
 
 
