@@ -14,7 +14,10 @@ it while lifting, ``avg_rank`` mean GeoGrasp rank of the top grasp (attempts tha
 mean number of grasps generated, ``grasp_rate`` grasps / attempts.
 Tables: I frontal, all poses; II frontal, the tallest poses only (resting height within 5 mm of the
 object's tallest); III frontal "360": one chain of 12 grasp-turn-set-down steps from the tallest pose,
-each step re-scanning wherever the object was left; IV top-down, all poses; V top-down 360.
+each step re-scanning wherever the object was left (the paper's subset: orange juice, tomato sauce, plus
+milk); IV top-down, all poses; V top-down 360 (milk, alphabet soup, as the paper). ``--quick``: 3 poses,
+4-step chains for every object. ``$OBJSCAN_BENCH_OBJECTS`` (comma-separated), ``$OBJSCAN_BENCH_POSES``
+and ``$OBJSCAN_BENCH_CHAIN`` narrow a run; ``$OBJSCAN_BENCH_WORKERS`` runs objects in parallel processes.
 ``rotation[method]``: ``success_rate`` share of held grasps whose turn and set-down left the object
 standing in the pose it was grasped in (not toppled), ``mean_degree_change`` mean |yaw change| of the
 object over those set-downs (the paper's "average degree change" after a commanded 30 deg; it reports
@@ -27,6 +30,7 @@ the table and the object), the contact by physics.
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from dataclasses import replace
@@ -141,60 +145,88 @@ def _row(name: str, attempts: list[dict[str, Any]]) -> dict[str, Any]:
             "reasons": sorted({a["reason"] for a in attempts if not a["held"]})}
 
 
-def run(quick: bool = False) -> dict[str, Any]:
-    from services.sim.catalogue import hope_names, load_object
+#: Objects of the 360 chains in the full run: the paper's Tables III (frontal) and V (top-down) subsets.
+CHAIN_OBJECTS = {"frontal": ("orange_juice", "tomato_sauce", "milk"), "top_down": ("milk", "alphabet_soup")}
+
+
+def object_results(name: str, n_poses: int | None, chain_steps: int, chains: dict[str, tuple[str, ...]] | None,
+                   seed: int = 0) -> dict[str, Any]:
+    """Every attempt on one object: per method, the attempts per start pose and the 360 chain (when the
+    object is in ``chains[method]``, or always when ``chains`` is None)."""
+    from services.sim.catalogue import load_object
     from services.sim.world import World
 
     t0 = time.time()
-    names = hope_names()
-    orientations = initial_orientations()[: 3 if quick else None]
-    chain_steps = 4 if quick else 12
-    seed = 0
-    tables: dict[str, list[dict[str, Any]]] = {k: [] for k in ("I", "II", "III", "IV", "V")}
-    turns: dict[str, list[dict[str, Any]]] = {m: [] for m in METHODS}
-    per_pose: dict[str, Any] = {}
-    for name in names:
-        obj = load_object(name)
-        probe = World(obj, physics="mujoco", seed=seed)
-        poses = [(pname, resting_pose(obj, probe._physics, R)) for pname, R in orientations]
-        heights = {pname: resting_height(obj, T) for pname, T in poses}
-        tallest = max(heights.values())
-        per_pose[name] = {"heights_m": heights}
-        for method, (t_all, t_tall, t_360) in zip(METHODS, (("I", "II", "III"), ("IV", "V", "V")), strict=True):
-            results = {}
-            for i, (pname, T) in enumerate(poses):
-                w = World(obj, profile="robot-turned", physics="mujoco", seed=seed + i, object_pose=T)
-                results[pname] = attempt(w, method, seq=100 * i)
-                if "turn" in results[pname]:
-                    turns[method].append(results[pname]["turn"])
-            per_pose[name][method] = results
-            print(f"grasping: {name} {method}: {sum(r['held'] for r in results.values())}/{len(results)} held "
-                  f"({time.time() - t0:.0f} s)", file=sys.stderr, flush=True)
-            tables[t_all].append(_row(name, list(results.values())))
-            if method == "frontal":
-                tables[t_tall].append(_row(name, [r for p, r in results.items()
-                                                  if heights[p] >= tallest - TALLEST_TOL]))
-            # the 360 chain: the tallest pose, then wherever each step leaves the object
-            start = max(poses, key=lambda pt: heights[pt[0]])[1]
+    obj = load_object(name)
+    probe = World(obj, physics="mujoco", seed=seed)
+    poses = [(pname, resting_pose(obj, probe._physics, R)) for pname, R in initial_orientations()[:n_poses]]
+    heights = {pname: resting_height(obj, T) for pname, T in poses}
+    out: dict[str, Any] = {"heights_m": heights}
+    for method in METHODS:
+        results = {}
+        for i, (pname, T) in enumerate(poses):
+            w = World(obj, profile="robot-turned", physics="mujoco", seed=seed + i, object_pose=T)
+            results[pname] = attempt(w, method, seq=100 * i)
+        out[method] = results
+        chain = []
+        if chains is None or name in chains.get(method, ()):
+            start = max(poses, key=lambda pt: heights[pt[0]])[1]  # the tallest pose, then wherever it lies
             w = World(obj, profile="robot-turned", physics="mujoco", seed=seed + 50, object_pose=start)
             chain = [attempt(w, method, seq=1000 + 10 * k) for k in range(chain_steps)]
-            for a in chain:
+        out[f"{method}_360"] = chain
+        print(f"grasping: {name} {method}: {sum(r['held'] for r in results.values())}/{len(results)} held, "
+              f"360 chain {sum(a['held'] for a in chain)}/{len(chain)} ({time.time() - t0:.0f} s)",
+              file=sys.stderr, flush=True)
+    return out
+
+
+def run(quick: bool = False) -> dict[str, Any]:
+    """All HOPE objects (``$OBJSCAN_BENCH_WORKERS`` processes, default 1: one object each at a time)."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from services.sim.catalogue import hope_names
+
+    t0 = time.time()
+    names = [n for n in hope_names() if n in os.environ.get("OBJSCAN_BENCH_OBJECTS", n).split(",")]
+    n_poses = int(os.environ.get("OBJSCAN_BENCH_POSES", 3 if quick else 7))
+    chain_steps = int(os.environ.get("OBJSCAN_BENCH_CHAIN", 4 if quick else 12))
+    chains = None if quick else CHAIN_OBJECTS
+    workers = max(1, int(os.environ.get("OBJSCAN_BENCH_WORKERS", "1")))
+    args = [(n, n_poses, chain_steps, chains) for n in names]
+    if workers > 1:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            per_object = dict(zip(names, pool.map(object_results, *zip(*args, strict=True)), strict=True))
+    else:
+        per_object = {n: object_results(*a) for n, a in zip(names, args, strict=True)}
+    tables: dict[str, list[dict[str, Any]]] = {k: [] for k in ("I", "II", "III", "IV", "V")}
+    turns: dict[str, list[dict[str, Any]]] = {m: [] for m in METHODS}
+    for name in names:
+        res = per_object[name]
+        tallest = max(res["heights_m"].values())
+        tall = [p for p, h in res["heights_m"].items() if h >= tallest - TALLEST_TOL]
+        tables["I"].append(_row(name, list(res["frontal"].values())))
+        tables["II"].append(_row(name, [res["frontal"][p] for p in tall]))
+        tables["IV"].append(_row(name, list(res["top_down"].values())))
+        for method, key in (("frontal", "III"), ("top_down", "V")):
+            if res[f"{method}_360"]:
+                tables[key].append(_row(name, res[f"{method}_360"]))
+            for a in list(res[method].values()) + res[f"{method}_360"]:
                 if "turn" in a:
                     turns[method].append(a["turn"])
-            tables[t_360].append(_row(name, chain))
-            per_pose[name][f"{method}_360"] = [{k: v for k, v in a.items()} for a in chain]
     rotation = {}
     for method, ts in turns.items():
         ok = [t for t in ts if t["upright_kept"] and not t["toppled"]]
         rotation[method] = {"turns": len(ts), "success_rate": len(ok) / len(ts) if ts else 0.0,
                             "mean_degree_change": float(np.mean([t["degree_change"] for t in ok])) if ok else None,
                             "toppled": sum(t["toppled"] for t in ts)}
-    return {"physics": "mujoco", "quick": quick, "objects": names, "poses": [p for p, _ in orientations],
-            "chain_steps": chain_steps, "tables": tables, "rotation": rotation,
+    return {"physics": "mujoco", "quick": quick, "objects": names,
+            "poses": [p for p, _ in initial_orientations()[:n_poses]], "chain_steps": chain_steps,
+            "chain_objects": {m: list(v) for m, v in (chains or {m: tuple(names) for m in METHODS}).items()},
+            "tables": tables, "rotation": rotation,
             "paper": {"tables": {k: {o: dict(zip(("grasps", "slips", "avg_rank", "avg_grasp", "grasp_rate"), v,
                                                  strict=True)) for o, v in rows.items()} for k, rows in PAPER.items()},
                       "rotation": PAPER_ROTATION},
-            "per_pose": per_pose, "seconds": time.time() - t0}
+            "per_object": per_object, "seconds": time.time() - t0}
 
 
 def main(quick: bool = False) -> None:
