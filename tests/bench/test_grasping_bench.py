@@ -38,3 +38,15 @@ def test_a_row_counts_grasps_slips_ranks_and_the_rate():
     assert (r["attempts"], r["grasps"], r["slips"]) == (4, 2, 1)
     assert r["avg_rank"] == pytest.approx(8.0) and r["avg_grasp"] == pytest.approx(1.5)
     assert r["grasp_rate"] == pytest.approx(0.5) and r["reasons"] == ["no_grasp", "slip"]
+
+
+def test_a_turn_is_measured_about_the_table_normal_whatever_side_the_object_lies_on():
+    from bench.grasping import turn_figures
+    from common.geometry import make_transform, rotation_about_axis
+
+    lying = make_transform(rotation_about_axis([1, 0, 0], np.pi / 2), [0.6, 0.0, 0.03])
+    turned = make_transform(rotation_about_axis([0, 0, 1], np.radians(35.0)), [0, 0, 0]) @ lying
+    f = turn_figures(lying, turned)
+    assert f["degree_change"] == pytest.approx(35.0, abs=1e-6) and f["upright_kept"]
+    overturned = make_transform(rotation_about_axis([0, 1, 0], np.pi / 2), [0, 0, 0]) @ lying
+    assert not turn_figures(lying, overturned)["upright_kept"]
