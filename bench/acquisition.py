@@ -3,11 +3,18 @@
 Runs the main job (``objscan scan``) on the twin: 12 views of a HOPE object (``quick``: 4 views) under the
 ``robot-turned`` profile, and reports the time, the grasp attempts and re-scans it took, and the model's
 accuracy against the ground-truth mesh (Chamfer, one-sided accuracy and completeness, F-score).
+
+The twin's grasp/set-down model is ``$OBJSCAN_BENCH_PHYSICS`` (``mujoco``, the default as for ``objscan
+scan``, or ``geometric``). ``$OBJSCAN_BENCH_OBJECTS`` (comma-separated HOPE names or mesh paths) scans
+several objects one after the other: the figures then sit under ``objects`` (one entry each). With
+``$OBJSCAN_BENCH_SESSIONS`` (comma-separated finished session folders, e.g. of ``objscan scan``) nothing
+is scanned: those sessions are scored from their ``report.json`` and ``journal.json``.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -20,14 +27,16 @@ from common.messages import Request
 from services.cli.cells import cell_specs
 
 
-def acquire(out: Path, *, object_name: str, views: int, profile: str, seed: int, log_dir: Path) -> dict[str, Any]:
+def acquire(out: Path, *, object_name: str, views: int, profile: str, seed: int, log_dir: Path,
+            physics: str = "mujoco") -> dict[str, Any]:
     with ServiceGroup(log_dir=log_dir) as group:
         # the orchestrator writes sessions only under its --sessions root: the session's parent folder
         group.launch(cell_specs(extra_args={"orchestrator": ["--sessions", str(Path(out).resolve().parent)]}),
                      timeout=300)
         t0 = time.perf_counter()
         request_sync(group.session, keys.orchestrator(keys.DEFAULT_ROBOT, "run"), Request(params={
-            "out": str(out), "config": {"object": object_name, "views": views, "profile": profile, "seed": seed}}),
+            "out": str(out), "config": {"object": object_name, "views": views, "profile": profile, "seed": seed,
+                                        "physics": physics}}),
             timeout=30)
         while True:
             s = request_sync(group.session, keys.orchestrator(keys.DEFAULT_ROBOT, "status"), timeout=10).info
@@ -35,19 +44,62 @@ def acquire(out: Path, *, object_name: str, views: int, profile: str, seed: int,
                 break
             time.sleep(1.0)
         seconds = time.perf_counter() - t0
+    return score_session(out, seconds=seconds, status=s.get("status"), error=s.get("last_error"))
+
+
+def true_turns(out: Path) -> dict[str, Any]:
+    """The turns the object really made between consecutive views (sim ground truth in each view's first
+    scan): |yaw change| per step, and the largest tilt from upright seen (a topple shows here)."""
+    import numpy as np
+
+    from services.sim.world import yaw_of
+
+    poses = []
+    for k in range(100):
+        meta = out / f"view_{k:02d}" / "scan_0" / "meta.json"
+        if not meta.is_file():
+            break
+        T = json.loads(meta.read_text()).get("T_base_object_true")
+        if T is None:
+            return {}
+        poses.append(np.asarray(T, dtype=float).reshape(4, 4))
+    if len(poses) < 2:
+        return {}
+    steps = [abs((np.degrees(yaw_of(b) - yaw_of(a)) + 180.0) % 360.0 - 180.0) for a, b in zip(poses, poses[1:])]
+    tilt = max(float(np.degrees(np.arccos(np.clip(T[2, 2], -1, 1)))) for T in poses)
+    return {"turn_deg_mean": round(float(np.mean(steps)), 2), "turn_deg_min": round(float(min(steps)), 2),
+            "turn_deg_max": round(float(max(steps)), 2), "max_tilt_deg": round(tilt, 2)}
+
+
+def score_session(out: Path, *, seconds: float | None = None, status: str | None = None,
+                  error: dict | None = None) -> dict[str, Any]:
+    """The figures of one finished session folder (its report.json and journal.json)."""
     report = json.loads((out / "report.json").read_text()) if (out / "report.json").is_file() else {}
     journal = json.loads((out / "journal.json").read_text())
     acc = report.get("accuracy", {})
-    return {"object": object_name, "views": views, "profile": profile, "status": s.get("status"),
+    cfg = journal.get("config", {})
+    views = int(cfg.get("views", 12))
+    if seconds is None:
+        seconds = float(sum((journal.get("timings_s") or {}).values())) or 0.0
+    return {"object": cfg.get("object"), "views": views, "profile": cfg.get("profile"),
+            "physics": cfg.get("physics", "geometric"), "status": status or journal.get("status"),
+            "topple_restarts": journal.get("topple_restarts", 0),
             "seconds_total": round(seconds, 1), "seconds_per_view": round(seconds / views, 1),
             "grasp_attempts": journal["counters"]["grasp_attempts"], "rescans": journal["counters"]["rescans"],
             **{k: acc.get(k) for k in ("chamfer_mm", "accuracy_mm", "completeness_mm", "fscore_2mm", "fscore_5mm")},
             "unaligned_chamfer_mm": acc.get("unaligned", {}).get("chamfer_mm"),
             "configuration": report.get("model_figures", {}).get("configuration"),
-            "timings_s": journal.get("timings_s"), "session": str(out), "error": s.get("last_error")}
+            "true_turns": true_turns(out),
+            "timings_s": journal.get("timings_s"), "session": str(out), "error": error or journal.get("error")}
 
 
 def run(quick: bool = False) -> dict[str, Any]:
+    sessions = [p for p in os.environ.get("OBJSCAN_BENCH_SESSIONS", "").split(",") if p.strip()]
+    if sessions:
+        return {"objects": [score_session(Path(p.strip())) for p in sessions]}
+    physics = os.environ.get("OBJSCAN_BENCH_PHYSICS", "mujoco")
+    names = [n.strip() for n in os.environ.get("OBJSCAN_BENCH_OBJECTS", "milk").split(",") if n.strip()]
     root = Path(tempfile.mkdtemp(prefix="objscan-bench-acq-"))
-    return acquire(root / "session", object_name="milk", views=4 if quick else 12, profile="robot-turned",
-                   seed=1, log_dir=root / "logs")
+    results = [acquire(root / f"session_{i}", object_name=name, views=4 if quick else 12, profile="robot-turned",
+                       seed=1, log_dir=root / f"logs_{i}", physics=physics) for i, name in enumerate(names)]
+    return results[0] if len(results) == 1 else {"objects": results}

@@ -17,6 +17,11 @@ in one process and with one worker process per core (at least 2), measured along
 faster of the two (the CLI's default picks by core count, see ``reconstruct.default_workers``).
 
 ``run(quick=True)`` does one object (milk) on the hand-turned profile; ``run()`` all objects, both profiles.
+
+Physics acquisitions (issue 16): with ``$OBJSCAN_BENCH_SESSIONS`` (comma-separated session folders of
+``objscan scan --physics mujoco``) the views are those sessions' frames instead, so the turns between
+views are whatever the contact simulation produced (in-hand rotation, set-down slides), not a profile's
+draw; the rows are the auto choice, no_region, pose_graph and the true-pose oracle (``physics_sessions``).
 """
 
 from __future__ import annotations
@@ -50,6 +55,60 @@ def _views(obj: str, profile: str, seed: int):
                               T0 @ invert(np.asarray(fr[0].meta["T_base_object_true"])))
              for k, fr in enumerate(frames)]
     return views, T0, time.perf_counter() - t0, frames
+
+
+def _session_views(session):  # noqa: ANN001, ANN202
+    """Views and ground truth of a finished acquisition's session folder (sim frames with true poses)."""
+    from pathlib import Path
+
+    from common.geometry import invert
+    from common.session_folder import read_scan
+    from services.registration.dynamic.views import view_from_static
+    from services.registration.static.pipeline import register_view
+    from services.sim.catalogue import load_object
+
+    session = Path(session)
+    frames = []
+    for k in range(12):
+        try:
+            frames.append([read_scan(session, k, j) for j in range(3)])
+        except Exception:  # noqa: BLE001 - a view the session never captured ends the list
+            break
+    T0 = np.asarray(frames[0][0].meta["T_base_object_true"], dtype=float).reshape(4, 4)
+    views = [view_from_static(register_view(fr), float(fr[0].meta.get("commanded_turn_deg", 30.0 * k)), k,
+                              T0 @ invert(np.asarray(fr[0].meta["T_base_object_true"], dtype=float).reshape(4, 4)))
+             for k, fr in enumerate(frames)]
+    m = frames[0][0].meta["object_model"]
+    obj = load_object(m["source"] or m["name"], scale=m["scale"], up_axis=m["up_axis"])
+    pts = obj.gt_points(60_000, seed=0)
+    pts = pts[pts[:, 2] > 0.004]
+    return views, pts @ T0[:3, :3].T + T0[:3, 3], frames[0][0].meta.get("physics", "geometric")
+
+
+def measure_session(session, rows: tuple[str, ...] = ("no_region", "pose_graph", "auto", "oracle")) -> dict:  # noqa: ANN001
+    """Chamfer (mm) and seconds per row on a recorded acquisition's frames."""
+    from services.registration.dynamic.combine import CombineConfig
+    from services.registration.dynamic.model import DynamicConfig, build_model, fuse
+    from services.registration.dynamic.synthetic import oracle_poses
+
+    views, gt, physics = _session_views(session)
+    out: dict = {"session": str(session), "views": len(views), "physics": physics}
+    for row in rows:
+        t = time.perf_counter()
+        extra: dict = {}
+        if row == "oracle":
+            xyz = fuse(views, oracle_poses(views, gt), 0.001).xyz
+        else:
+            cfg = (DynamicConfig() if row == "auto" else
+                   DynamicConfig(configuration="no_region", combine=CombineConfig(method="pose_graph"))
+                   if row == "pose_graph" else DynamicConfig(configuration=row, combine=CombineConfig(method="paper")))
+            m = build_model(views, cfg)
+            xyz = m.xyz
+            extra = {"configuration": m.configuration, "loop_rotation_deg": m.loop_closure["rotation_deg"]}
+        out[row] = {"chamfer_mm": _chamfer(xyz, gt), "seconds": time.perf_counter() - t, **extra}
+    if "auto" in out and "oracle" in out:
+        out["auto_over_oracle"] = out["auto"]["chamfer_mm"] / out["oracle"]["chamfer_mm"]
+    return out
 
 
 def _reconstruct_seconds(frames: list, workers: int) -> float:
@@ -137,6 +196,9 @@ def run(quick: bool = False) -> dict:
     """Measure; returns one JSON-able dict (per profile: table, per-object figures, targets)."""
     from services.registration.dynamic.synthetic import hope_objects
 
+    sessions = [p.strip() for p in os.environ.get("OBJSCAN_BENCH_SESSIONS", "").split(",") if p.strip()]
+    if sessions:
+        return {"physics_sessions": [measure_session(p) for p in sessions]}
     objects = ["milk"] if quick else hope_objects()
     profiles = ["hand-turned"] if quick else ["hand-turned", "robot-turned"]
     rows = ("no_region", "pose_graph", "auto", "oracle") if quick else ROWS
@@ -169,7 +231,7 @@ def main() -> None:
     import sys
 
     res = run(quick="--quick" in sys.argv)
-    for profile, p in res["profiles"].items():
+    for profile, p in res.get("profiles", {}).items():
         print(f"\n{profile}  (Chamfer in mm after alignment to the GT; paper values for reference)")
         print(f"{'row':16s} {'incl':>7s} {'excl':>7s} {'worst':>14s} {'sec':>7s}   paper incl/excl")
         for row, t in p["table"].items():

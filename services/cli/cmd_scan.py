@@ -49,6 +49,9 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--profile", default="robot-turned", choices=["ideal", "hand-turned", "robot-turned"],
                    help="sim error profile (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--physics", default="mujoco", choices=["mujoco", "geometric"],
+                   help="sim: grasp, lift and set-down by MuJoCo contact physics, or the fast geometric checker "
+                        "with drawn errors (default: %(default)s)")
     p.add_argument("--width", type=int, default=640)
     p.add_argument("--height", type=int, default=480)
     p.add_argument("--out", help="session folder (default: sessions/<object>-<time>)")
@@ -211,7 +214,8 @@ def _acquire(session, args, target: str, *, local: bool, t0: float) -> int:  # n
     else:
         params = {"out": target, "config": {
             "object": args.object, "views": args.views, "profile": args.profile, "seed": args.seed,
-            "width": args.width, "height": args.height, "force_first_slip": args.force_first_slip}}
+            "physics": args.physics, "width": args.width, "height": args.height,
+            "force_first_slip": args.force_first_slip}}
         params["record"] = not args.no_record
         if args.library:
             params["library"] = str(Path(args.library).resolve())

@@ -158,7 +158,11 @@ class Cell:
 
     # ---------------------------------------------------------------------------- digital twin only
     async def sim(self, op: str, **params: Any) -> dict[str, Any]:
-        reply = await self._request(keys.sim(self.robot, "world"), Request(params={"op": op, **params}), timeout=60.0)
+        # a reset builds the world: with mujoco physics a new non-convex mesh is decomposed first (coacd,
+        # seconds to a minute on a loaded machine, then cached), so it gets longer than other operations
+        timeout = 300.0 if op == "reset" else 60.0
+        reply = await self._request(keys.sim(self.robot, "world"), Request(params={"op": op, **params}),
+                                    timeout=timeout)
         info = _expect(reply, Ok).info
         self.twin_seen = True
         return info

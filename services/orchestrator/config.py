@@ -130,6 +130,7 @@ class AcquisitionConfig:
     views: int = 12
     turn_deg: float = 30.0
     profile: str = "robot-turned"
+    physics: str = "geometric"  # sim: "mujoco" (contact physics) or "geometric" (fast checker); the CLI picks mujoco
     seed: int = 0
     width: int = 640
     height: int = 480
@@ -138,6 +139,11 @@ class AcquisitionConfig:
     max_grasp_attempts: int = 16  # executions tried per turn before re-scanning (dry-run failures do not count)
     max_rescans: int = 2  # re-scans per view before the session ends with a reason
     force_first_slip: bool = False  # sim: the first grasp slips (recovery test)
+    # a view whose object height differs from the previous one's by more than max(m, rel * height) means the
+    # object toppled at the set-down: the views restart from where it lies, at most this many times
+    topple_height_tol_m: float = 0.02
+    topple_height_rel: float = 0.25
+    max_topple_restarts: int = 1
     evaluate: bool = True  # compare with ground truth when the cell knows it (sim)
     workspace_center: tuple[float, float] = (0.60, 0.0)  # where the locate pose looks (and the twin puts the object)
     scan: ScanGeometry = field(default_factory=ScanGeometry)

@@ -42,6 +42,7 @@ from common.messages import Grasp
 from common.session_folder import view_dir
 from services.orchestrator.cell import Cell
 from services.orchestrator.config import AcquisitionConfig
+from services.orchestrator.limits import name_limit
 from services.orchestrator.planning import (
     TurnPoses,
     look_pose,
@@ -51,6 +52,7 @@ from services.orchestrator.planning import (
     turn_sequences,
 )
 from services.orchestrator.store import SessionStore
+from services.orchestrator.topple import topple_reason
 
 log = logging.getLogger("objscan.orchestrator")
 
@@ -255,7 +257,7 @@ class Acquisition:
             try:
                 x, y = self.config.workspace_center
                 await self.cell.sim("reset", object=self.config.object, profile=self.config.profile,
-                                    seed=self.config.seed, x=float(x), y=float(y))
+                                    seed=self.config.seed, x=float(x), y=float(y), physics=self.config.physics)
                 self.j["simulated"] = True
                 if self.config.force_first_slip:
                     await self.cell.sim("force_slip")
@@ -354,6 +356,11 @@ class Acquisition:
             except RemoteError as exc:
                 self.decide("static registration failed", code=exc.code, message=exc.message)
                 return await self._rescan(k, f"registration failed: {exc.code}")
+            reason = (topple_reason(self.j["heights"].get(str(k - 1)), float(result.height),
+                                    self.config.topple_height_tol_m, self.config.topple_height_rel, k)
+                      if k > 0 else None)
+            if reason is not None:
+                return self._restart_after_topple(k, reason, result)
             self.store.save_view(result)
             self._remember_object(k, result)
             self.decide("view registered", points=len(result.cloud),
@@ -362,10 +369,39 @@ class Acquisition:
             return State.MODEL
         return State.PLAN_GRASP
 
+    def _limits(self, k: int) -> dict[str, Any]:
+        """What stood in the way at view ``k`` (planner rejections, dry-run codes, grasp failures)."""
+        return self.j.setdefault("limits", {}).setdefault(str(k), {})
+
+    def _restart_after_topple(self, k: int, reason: str, result: ViewResult) -> State:
+        """The object toppled before view ``k``: set views 0..k aside (kept on disk) and scan again from
+        view 0 where it now lies, so no view of the old resting pose is fused with the new one."""
+        n = int(self.j.get("topple_restarts", 0)) + 1
+        if n > self.config.max_topple_restarts:
+            raise AcquisitionFailed(f"view {k}: {reason}; it toppled again after {n - 1} restart(s) of the views: "
+                                    "giving up (the object does not stay standing after a set-down)",
+                                    detail={"view": k, "restarts": n - 1})
+        self.j["topple_restarts"] = n
+        self.j["counters"]["topple_restarts"] = n
+        for v in range(k + 1):
+            src = view_dir(self.store.path, v)
+            if src.exists():
+                shutil.move(str(src), str(src.with_name(f"{src.name}_toppled{n}")))
+        self.j.update(view=0, turns_deg=[0.0], scan_sets={}, rescans={}, grasp_mode="auto", failed_grasps={},
+                      centers={}, heights={})
+        self.j.pop("turn_direction", None)
+        self._remember_object(-1, result)
+        self._plan = None
+        self.decide("object toppled: restarting the views from where it lies", reason=reason, restart=n)
+        return State.SCAN
+
     async def _rescan(self, k: int, reason: str) -> State:
         n = int(self.j["rescans"].get(str(k), 0)) + 1
         if n > self.config.max_rescans:
-            raise AcquisitionFailed(f"view {k}: giving up after {n - 1} re-scans ({reason})")
+            lim = self.j.get("limits", {}).get(str(k), {})
+            limit = name_limit(lim.get("planner", {}), lim.get("dry_run", []), lim.get("grasp", []))
+            raise AcquisitionFailed(f"view {k}: giving up after {n - 1} re-scans ({reason}); limit: {limit}",
+                                    detail={"view": k, "limit": limit.split(":")[0]})
         self.j["rescans"][str(k)] = n
         self.j["counters"]["rescans"] += 1
         # intent first: a kill between the move and the next journal write must not lose the view's frames
@@ -398,6 +434,10 @@ class Acquisition:
             "grasps": [{"kind": g.kind, "rank": g.rank, "width": g.width, "contacts": np.asarray(g.contacts).tolist(),
                         "metrics": g.metrics} for g in plan.grasps]})
         self.decide("grasps planned", mode=mode, n=len(plan.grasps), explanation=plan.explanation)
+        counts = (plan.rejections or {}).get("counts", {}) if isinstance(plan.rejections, dict) else {}
+        planner = self._limits(k).setdefault("planner", {})
+        for reason, count in counts.items():
+            planner[reason] = planner.get(reason, 0) + int(count)
         if not plan.grasps:
             if mode == "auto":
                 self.j["grasp_mode"] = "top_down"
@@ -454,6 +494,7 @@ class Acquisition:
                 q_start = await self._check_turn(seq, view.center)
             except RemoteError as exc:
                 failures.append(f"{seq.name}:{exc.code}")
+                self._limits(k).setdefault("dry_run", []).append(exc.code)
                 self.decide("grasp pose not executable", grasp=gi, pose=seq.name, step=self._step, code=exc.code,
                             message=exc.message[:200], dry_run=True)
                 continue
@@ -464,6 +505,7 @@ class Acquisition:
             except GraspFailed as exc:
                 self.j["counters"]["slips"] += 1
                 self.j["failed_grasps"].setdefault(str(k), []).append(signature)
+                self._limits(k).setdefault("grasp", []).append(exc.message.split(":")[0][:40])
                 self.decide("grasp failed", grasp=gi, pose=seq.name, reason=exc.message)
                 self._plan = None
                 self.j["grasp_mode"] = "auto"

@@ -62,8 +62,10 @@ class SimService(Service):
             event(log, "world restored from the state file", path=str(path), object=self.world.obj.name,
                   frames=self.seq, attached=self.world.attached)
         else:
-            self.world = await self.run_cpu(World, opts.get("object", "milk"), profile=opts.get("profile", "ideal"),
-                                            seed=int(opts.get("seed", 0)))
+            self.world = await self.run_cpu(lambda: World(opts.get("object", "milk"),
+                                                          profile=opts.get("profile", "ideal"),
+                                                          seed=int(opts.get("seed", 0)),
+                                                          physics=opts.get("physics", "geometric")))
             self.seq = 0
         self._persist()
         self._world_lock = asyncio.Lock()
@@ -118,11 +120,13 @@ class SimService(Service):
                 obj = params.get("object", w.obj.name)
                 profile = params.get("profile", w.profile.name)
                 seed = int(params.get("seed", w.seed))
+                physics = str(params.get("physics", w.physics))
                 pose = None
                 if "x" in params or "y" in params or "yaw_deg" in params:
                     pose = default_object_pose(float(params.get("x", 0.6)), float(params.get("y", 0.0)),
                                                float(params.get("yaw_deg", 0.0)))
-                new = await self.run_cpu(lambda: World(obj, profile=profile, seed=seed, object_pose=pose))
+                new = await self.run_cpu(lambda: World(obj, profile=profile, seed=seed, object_pose=pose,
+                                                       physics=physics))
                 if w.joint_names:  # the arm has not moved: the new world knows where it is
                     new.set_joint_state(w.joint_names, w.joint_positions, T_base_gripper=w.T_base_gripper,
                                         T_base_camera=w.T_base_camera)
@@ -199,6 +203,7 @@ class SimService(Service):
 
     def health_info(self) -> dict[str, object]:
         info: dict[str, object] = {"object": self.world.obj.name, "profile": self.world.profile.name,
+                                   "physics": self.world.physics,
                                    "frames": self.seq, "restored": self.restored,
                                    "state_file": None if self.state_file is None else str(self.state_file.path)}
         if self.state_error:
@@ -219,6 +224,8 @@ def main() -> None:
     p.add_argument("--object", default="milk", help="HOPE object name or a mesh path (default: %(default)s)")
     p.add_argument("--profile", default="ideal", help="error profile: ideal | hand-turned | robot-turned")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--physics", default="geometric", choices=["geometric", "mujoco"],
+                   help="grasp/set-down model: geometric checker + drawn errors, or MuJoCo contact physics")
     p.add_argument("--state-file", default=None,
                    help="where the world is kept across restarts ('none': nowhere; default: env "
                         "OBJSCAN_SIM_STATE_FILE, else $OBJSCAN_STATE_DIR/sim-ROBOT-NETWORK.json; see docs/sim.md)")
@@ -226,5 +233,6 @@ def main() -> None:
                    help="ignore a saved world and start from --object/--profile/--seed (overwrites the file)")
     args = p.parse_args()
     run_service(lambda: SimService(settings_from_args(args, object=args.object, profile=args.profile,
-                                                      seed=args.seed, state_file=args.state_file,
+                                                      seed=args.seed, physics=args.physics,
+                                                      state_file=args.state_file,
                                                       fresh=args.fresh)))

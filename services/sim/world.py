@@ -26,6 +26,7 @@ from common.messages import Intrinsics, RGBDFrame
 from services.sim.catalogue import SimObject, load_object, resolve_object
 from services.sim.errors import SimError, SimInputError, check_transform
 from services.sim.gripper import GraspChecker, GraspOutcome, GripperSpec
+from services.sim.physics import PHYSICS_MODES, PhysicsConfig, PhysicsScene, tilt_deg
 from services.sim.profiles import ErrorProfile, get_profile
 from services.sim.render import RenderResult, RenderScene, TableSpec, render
 from services.sim.sensor_model import d435_intrinsics
@@ -36,6 +37,9 @@ _STREAM_SESSION, _STREAM_FRAME, _STREAM_GRASP, _STREAM_PLACE, _STREAM_TURN = ran
 _CONTACT_SAMPLES = 40000
 #: Version of ``World.snapshot``'s layout; ``from_snapshot`` refuses any other.
 SNAPSHOT_FORMAT = 1
+#: Geometric failures that are about the approach (the arm brings the pads there), not the contact: the
+#: physics mode keeps them from the geometric checker and simulates only what follows.
+_APPROACH_FAILURES = ("pad_hits_table", "too_wide", "pad_collides_with_object", "nothing_between_pads")
 
 
 class SimStateError(SimError):
@@ -71,8 +75,17 @@ class World:
 
     def __init__(self, obj: SimObject | str, *, profile: ErrorProfile | str = "ideal", seed: int = 0,
                  object_pose: np.ndarray | None = None, table: TableSpec | None = None,
-                 gripper: GripperSpec | None = None, scale: float | None = None, up_axis: str | None = None):
-        """``obj`` is a ``SimObject`` or a HOPE name / mesh path (loaded with ``scale`` and ``up_axis``)."""
+                 gripper: GripperSpec | None = None, scale: float | None = None, up_axis: str | None = None,
+                 physics: str = "geometric", physics_config: PhysicsConfig | None = None):
+        """``obj`` is a ``SimObject`` or a HOPE name / mesh path (loaded with ``scale`` and ``up_axis``).
+
+        ``physics``: "geometric" (the fast checker plus the profile's drawn slips, turn and placement errors)
+        or "mujoco" (grasp, lift and set-down simulated with contact, ``services/sim/physics.py``).
+        """
+        if physics not in PHYSICS_MODES:
+            raise SimInputError(f"physics must be one of {', '.join(PHYSICS_MODES)}, got {physics!r}",
+                                code="bad_value", detail={"physics": str(physics)[:40]})
+        self.physics = physics
         self.obj = load_object(obj, scale=scale, up_axis=up_axis) if isinstance(obj, str) else obj
         self.profile = get_profile(profile)
         self.table = table or TableSpec()
@@ -84,6 +97,7 @@ class World:
         self._checker = GraspChecker(self.obj.vertices, self.obj.triangles, pts, self.obj.triangle_normals()[tri],
                                      self.obj.surface_area, gripper)
         self._scene: RenderScene | None = None
+        self._physics = PhysicsScene(self.obj, gripper, physics_config) if physics == "mujoco" else None
         self.reset(seed)
 
     # -- state ------------------------------------------------------------------------------------------
@@ -108,8 +122,10 @@ class World:
             self.T_base_gripper: np.ndarray | None = None
             self.T_base_camera: np.ndarray | None = None
             self._force_slip = False
+            self._pad_state: tuple[float, ...] | None = None
             self.counts = {"frames": 0, "grasps": 0, "slips": 0, "set_downs": 0, "turns": 0}
             self.last_set_down: dict = {}
+            self.last_grasp: dict = {}
 
     def _rng(self, stream: int, index: int, extra: int = 0) -> np.random.Generator:
         return np.random.default_rng(np.random.SeedSequence([self.seed, stream, int(index), int(extra)]))
@@ -198,6 +214,7 @@ class World:
                          T_base_camera=believed, stamp=time.time() if stamp is None else float(stamp), seq=int(seq),
                          T_base_camera_true=np.asarray(T_base_camera_true, dtype=np.float64).copy(),
                          meta={"source": "sim", "object": self.obj.name, "profile": self.profile.name,
+                               "physics": self.physics,
                                "T_base_object_true": T_obj, "object_model": self.object_model()})
 
     # -- hands ------------------------------------------------------------------------------------------
@@ -226,6 +243,8 @@ class World:
             rng = self._rng(_STREAM_GRASP, index)
             T_object_gripper = invert(self.T_base_object) @ Tg
             outcome, contact = self._checker.evaluate(T_object_gripper, Tg, self.gripper_opening, opening_cmd)
+            if self._physics is not None and outcome.reason not in _APPROACH_FAILURES and not self._force_slip:
+                return self._close_physics(Tg, opening_cmd, rng)
             if not outcome.success:
                 self.gripper_opening = outcome.width
                 return outcome
@@ -255,6 +274,24 @@ class World:
             self.gripper_opening = outcome.width
             return outcome
 
+    def _close_physics(self, Tg: np.ndarray, opening_cmd: float, rng: np.random.Generator) -> GraspOutcome:
+        """The mujoco mode's grasp: close, lift and hold in the contact simulation (lock held)."""
+        result = self._physics.grasp(self.T_base_object, Tg, self.gripper_opening, opening_cmd, rng)
+        self.gripper_opening = result.width
+        self.last_grasp = {"reason": result.reason, "in_hand_turn_deg": result.in_hand_turn_deg,
+                           "width": result.width}
+        if not result.held:
+            if result.reason == "slip":
+                self.counts["slips"] += 1
+            self.T_base_object = result.T_base_object  # wherever it fell or was pushed
+            return GraspOutcome(False, result.reason, result.width, result.message)
+        self.T_gripper_object = result.T_gripper_object
+        self._pad_state = result.pad_state
+        self.attached = True
+        self._yaw_at_grasp = yaw_of(self.T_base_object)
+        self.T_base_object = Tg @ result.T_gripper_object
+        return GraspOutcome(True, "ok", result.width, result.message)
+
     def move_gripper(self, T_base_gripper: np.ndarray) -> None:
         """The TCP moved (true pose from the arm's FK); a held object follows it."""
         Tg = check_transform(T_base_gripper, "T_base_gripper")
@@ -279,6 +316,8 @@ class World:
             released = self.T_base_object
             commanded = _wrap_deg(np.degrees(yaw_of(released) - self._yaw_at_grasp))
             rng = self._rng(_STREAM_PLACE, self.counts["set_downs"])
+            if self._physics is not None and self._pad_state is not None and self.T_base_gripper is not None:
+                return self._set_down_physics(commanded, rng)
             achieved, shift, bounced = self.profile.draw_set_down(commanded, self.turn_gain, rng)
             self.counts["set_downs"] += 1
             yaw = self._yaw_at_grasp + np.radians(achieved)
@@ -289,6 +328,23 @@ class World:
             self.last_set_down = {"gripper_turn_deg": commanded, "achieved_turn_deg": achieved,
                                   "shift_m": shift.tolist(), "bounced": bounced}
             return dict(self.last_set_down)
+
+    def _set_down_physics(self, commanded: float, rng: np.random.Generator) -> dict:
+        """The mujoco mode's set-down: open the pads where the hand is and let the object come to rest."""
+        res = self._physics.set_down(self.T_base_gripper, self.T_gripper_object, self._pad_state, rng)
+        self.counts["set_downs"] += 1
+        before = self.T_base_object
+        self.T_base_object = res.T_base_object
+        self.attached = False
+        self.T_gripper_object = None
+        self._pad_state = None
+        achieved = _wrap_deg(np.degrees(yaw_of(res.T_base_object)) - np.degrees(self._yaw_at_grasp))
+        self.last_set_down = {"gripper_turn_deg": commanded, "achieved_turn_deg": achieved,
+                              "shift_m": (res.T_base_object[:2, 3] - before[:2, 3]).tolist(),
+                              "bounced": res.bounce_m > 0.003, "bounce_m": res.bounce_m,
+                              "tilt_deg": res.tilt_deg, "toppled": res.toppled, "settled": res.settled,
+                              "physics": "mujoco"}
+        return dict(self.last_set_down)
 
     def turn_object(self, angle_deg: float, rng: np.random.Generator | None = None) -> float:
         """Turn the object on the table by ``angle_deg`` about the table normal through its footprint centre,
@@ -325,8 +381,10 @@ class World:
                 "object": self.obj.name,
                 "object_model": self.object_model(),
                 "profile": self.profile.name,
+                "physics": self.physics,
                 "seed": self.seed,
                 "attached": self.attached,
+                "object_tilt_deg": tilt_deg(self.T_base_object),
                 "gripper_opening": self.gripper_opening,
                 "joint_names": list(self.joint_names),
                 "joint_positions": self.joint_positions.tolist(),
@@ -339,6 +397,7 @@ class World:
                     "hand_eye_error": m(self.hand_eye_error),
                     "turn_gain": self.turn_gain,
                     "last_set_down": dict(self.last_set_down),
+                    "last_grasp": dict(self.last_grasp),
                 },
             }
 
@@ -357,6 +416,8 @@ class World:
                 "format": SNAPSHOT_FORMAT,
                 "object_model": self.object_model(),
                 "profile": self.profile.name,
+                "physics": self.physics,
+                "pad_state": None if self._pad_state is None else list(self._pad_state),
                 "seed": self.seed,
                 "initial_pose": m(self._initial_pose),
                 "T_base_object": m(self.T_base_object),
@@ -389,7 +450,8 @@ class World:
         try:
             model = snap["object_model"]
             world = cls(_object_from_model(model), profile=str(snap["profile"]), seed=int(snap["seed"]),
-                        object_pose=np.asarray(snap["initial_pose"], dtype=np.float64))
+                        object_pose=np.asarray(snap["initial_pose"], dtype=np.float64),
+                        physics=str(snap.get("physics", "geometric")))
             with world._lock:
                 world.T_base_object = check_transform(snap["T_base_object"], "T_base_object")
                 world.attached = bool(snap["attached"])
@@ -405,6 +467,8 @@ class World:
                     T = snap[name]
                     setattr(world, name, None if T is None else check_transform(T, name))
                 world._force_slip = bool(snap["force_slip"])
+                pads = snap.get("pad_state")
+                world._pad_state = None if pads is None else tuple(float(q) for q in pads)
                 world.counts.update({str(k): int(v) for k, v in snap["counts"].items()})
                 world.last_set_down = dict(snap["last_set_down"])
                 world.hand_eye_error = check_transform(snap["hand_eye_error"], "hand_eye_error")
