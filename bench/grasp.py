@@ -62,7 +62,8 @@ def _backproject(frame) -> np.ndarray:
 
 def _crop_object(points: np.ndarray, xy: np.ndarray) -> np.ndarray:
     """The object above the table near ``xy`` (the registration service isolates it for real; the
-    benchmark only needs the object's points, so it crops around the sim's true object position)."""
+    benchmark only needs the object's points, so it crops around where the scans were aimed: the
+    estimated object centre, as a cell would know it, not the sim's true position)."""
     horiz = np.linalg.norm(points[:, :2] - xy, axis=1)
     return points[(points[:, 2] > 0.006) & (horiz < 0.12)]
 
@@ -102,7 +103,7 @@ def _sim_clouds(names: list[str], seed: int) -> dict[str, tuple[np.ndarray, np.n
             band = surf[np.abs(surf[:, 2] - 0.5 * surf[:, 2].max()) < 0.004]
             axis_obj = np.r_[fit_circle_2d(band[:, :2]).center, 0.0]
             TRUE_AXES[name] = (T[:3, :3] @ axis_obj + T[:3, 3])[:2]
-        xy = np.asarray(frames[0].meta["T_base_object_true"], float).reshape(4, 4)[:2, 3]
+        xy = np.asarray(frames[0].meta["planned_center"], float)[:2]  # the estimate, never the truth
         pts = np.vstack([_crop_object(_backproject(f), xy) for f in frames])
         out[name] = _with_normals(pts, [f.T_base_camera[:3, 3] for f in frames], rng)
     return out

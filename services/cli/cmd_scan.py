@@ -46,7 +46,7 @@ def register(sub) -> None:  # noqa: ANN001
                                    "the services (sim backends) when none are running.")
     p.add_argument("--object", default="milk", help="HOPE object name or mesh path (sim) (default: %(default)s)")
     p.add_argument("--views", type=int, default=12)
-    p.add_argument("--profile", default="robot-turned", choices=["ideal", "hand-turned", "robot-turned"],
+    p.add_argument("--profile", default="robot-turned", choices=["ideal", "hand-turned", "realistic", "robot-turned"],
                    help="sim error profile (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--physics", default="mujoco", choices=["mujoco", "geometric"],

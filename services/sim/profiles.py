@@ -4,6 +4,11 @@
 * ``hand-turned`` — a person turns the object 30° ± 5° between views (achieved minus commanded turn
   ~ N(0, 2.5°) clipped to ±5°, set down within a few mm), the robot only moves the camera: hand-eye
   calibration error, joint encoder noise and D435 noise apply.
+* ``realistic`` — what a real cell does to the camera and the scene on top of the hand-turned turns:
+  every scan's camera pose off by 1–3 mm and 0.3–1° (backlash, link flex; drawn per scan), a hand-eye
+  error of 3 mm / 0.5°, the object put down up to 3 cm from where it is expected, and the D435 model
+  fitted to real RealSense frames (``D435Noise.calibrated()``, ``objscan bench sensor``). The benchmarks'
+  default.
 * ``robot-turned`` — the arm grasps, turns and sets the object down (paper, Sec. IV): achieved turns
   average 26–44° instead of 30° (a per-session gain on the commanded turn drawn from [26/30, 44/30]),
   per-turn scatter, occasional bounces that add a large extra turn and a cm-scale shift, mm-scale
@@ -33,6 +38,12 @@ class ErrorProfile:
     hand_eye_deg: float = 0.0  # fixed per session: rotation error angle of the hand-eye calibration
     joint_noise_deg: float = 0.0  # per-reading encoder noise (sigma) of each of the 6 joints
     joint_lever_m: float = 0.35  # lever arm that turns joint angle noise into camera position noise
+    # per scan: |camera position error| (mm) and rotation error angle (deg), each uniform in its range,
+    # random directions (backlash, link flex, repeatability: what joint noise alone underestimates)
+    scan_pose_mm: tuple[float, float] = (0.0, 0.0)
+    scan_pose_deg: tuple[float, float] = (0.0, 0.0)
+    # the scene: the object stands up to this far (uniform over a disc) from where it is expected
+    object_offset_m: float = 0.0
     # turning: achieved yaw change = gain * commanded + N(0, turn_sigma) (clipped) [+ bounce]
     turn_gain_range: tuple[float, float] = (1.0, 1.0)  # per-session gain drawn uniformly from this range
     turn_sigma_deg: float = 0.0
@@ -54,6 +65,7 @@ class ErrorProfile:
         lo, hi = self.turn_gain_range
         bad = [f.name for f in fields(self) if _is_number(getattr(self, f.name))
                and not (np.isfinite(getattr(self, f.name)) and getattr(self, f.name) >= 0)]
+        bad += [name for name in ("scan_pose_mm", "scan_pose_deg") if not _is_range(getattr(self, name))]
         if bad or lo <= 0 or hi < lo or not 0 <= self.slip_prob <= 1 or not 0 <= self.bounce_prob <= 1:
             raise SimInputError(f"error profile {self.name!r} has invalid values {bad or ''}".strip(),
                                 code="bad_value", detail={"fields": bad})
@@ -61,7 +73,8 @@ class ErrorProfile:
     def to_dict(self) -> dict:
         """JSON-able form (for session.json and the sim's state)."""
         d = asdict(self)
-        d["turn_gain_range"] = list(self.turn_gain_range)
+        for name in _RANGES:
+            d[name] = list(getattr(self, name))
         return d
 
     # -- draws ----------------------------------------------------------------------------------------
@@ -93,6 +106,32 @@ class ErrorProfile:
         trans = rng.normal(0.0, s * self.joint_lever_m, 3)
         return make_transform(Rotation.from_rotvec(rot).as_matrix(), trans)
 
+    def draw_scan_pose_error(self, rng: np.random.Generator) -> np.ndarray:
+        """One scan's camera pose error (camera frame): a translation of |t| ~ U(scan_pose_mm) and a rotation
+        of angle ~ U(scan_pose_deg), in random directions. Identity, drawing nothing, when both are zero."""
+        if not any(self.scan_pose_mm) and not any(self.scan_pose_deg):
+            return np.eye(4)
+        from scipy.spatial.transform import Rotation
+
+        mm = rng.uniform(*self.scan_pose_mm)
+        deg = rng.uniform(*self.scan_pose_deg)
+        t = _unit(rng.standard_normal(3)) * mm * 1e-3
+        R = Rotation.from_rotvec(_unit(rng.standard_normal(3)) * np.radians(deg)).as_matrix()
+        return make_transform(R, t)
+
+    def draw_frame_pose_error(self, rng: np.random.Generator) -> np.ndarray:
+        """Everything that puts one frame's believed camera pose off besides the hand-eye error: joint
+        encoder jitter, then the per-scan pose error."""
+        return self.draw_joint_jitter(rng) @ self.draw_scan_pose_error(rng)
+
+    def draw_object_offset(self, rng: np.random.Generator) -> np.ndarray:
+        """The object's xy offset (m) from where it is expected: uniform over a disc of ``object_offset_m``."""
+        if self.object_offset_m <= 0:
+            return np.zeros(2)
+        r = self.object_offset_m * np.sqrt(rng.random())
+        a = rng.uniform(0.0, 2.0 * np.pi)
+        return np.array([r * np.cos(a), r * np.sin(a)])
+
     def draw_turn_gain(self, rng: np.random.Generator) -> float:
         lo, hi = self.turn_gain_range
         return float(lo if hi == lo else rng.uniform(lo, hi))
@@ -120,6 +159,15 @@ def _is_number(v: object) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
+_RANGES = ("turn_gain_range", "scan_pose_mm", "scan_pose_deg")
+
+
+def _is_range(v: object) -> bool:
+    """A (lo, hi) pair of finite numbers with 0 <= lo <= hi."""
+    return (isinstance(v, tuple) and len(v) == 2 and all(_is_number(x) and np.isfinite(x) for x in v)
+            and 0 <= v[0] <= v[1])
+
+
 def _unit(v: np.ndarray) -> np.ndarray:
     n = float(np.linalg.norm(v))
     return v / n if n > 1e-12 else np.array([1.0, 0.0, 0.0])
@@ -133,6 +181,13 @@ PROFILES: dict[str, ErrorProfile] = {
         name="hand-turned", **_HAND_EYE,
         turn_sigma_deg=2.5, turn_clip_deg=5.0,
         place_shift_sigma_m=0.002, place_shift_clip_m=0.005,
+    ),
+    "realistic": ErrorProfile(
+        name="realistic", hand_eye_mm=3.0, hand_eye_deg=0.5, joint_noise_deg=0.05,
+        scan_pose_mm=(1.0, 3.0), scan_pose_deg=(0.3, 1.0), object_offset_m=0.03,
+        turn_sigma_deg=2.5, turn_clip_deg=5.0,
+        place_shift_sigma_m=0.002, place_shift_clip_m=0.005,
+        camera=D435Noise.calibrated(),
     ),
     "robot-turned": ErrorProfile(
         name="robot-turned", **_HAND_EYE,
@@ -149,7 +204,8 @@ def profile_names() -> list[str]:
 
 
 def get_profile(name: str | ErrorProfile, **overrides) -> ErrorProfile:
-    """The profile called ``name`` ("ideal", "hand-turned", "robot-turned"), with fields overridden.
+    """The profile called ``name`` ("ideal", "hand-turned", "realistic", "robot-turned"), with fields
+    overridden.
 
     ``hand_turned``/``robot_turned`` spellings are accepted. Unknown names or fields raise
     ``SimInputError``.
@@ -168,8 +224,9 @@ def get_profile(name: str | ErrorProfile, **overrides) -> ErrorProfile:
     unknown = sorted(set(overrides) - known)
     if unknown:
         raise SimInputError(f"unknown error profile fields {unknown}", code="bad_value", detail={"fields": unknown})
-    if isinstance(overrides.get("turn_gain_range"), list):
-        overrides["turn_gain_range"] = tuple(overrides["turn_gain_range"])
+    for name in _RANGES:
+        if isinstance(overrides.get(name), list):
+            overrides[name] = tuple(overrides[name])
     return replace(base, **overrides)
 
 

@@ -6,6 +6,13 @@ profile's turn and placement errors) before the next view. Frames carry the comm
 the true object pose, so static and dynamic registration can be tested and benchmarked against ground
 truth; ``write_session`` stores them as a session folder (common/session_folder.py).
 
+Scan poses are planned as a real cell plans them: from where the object is *estimated* to be, never from
+the truth. View 0 is planned from a locate frame looking at where the object is expected; every later
+view from the previous view's first scan; each estimate is the static stage's object centre and height
+(``services.registration.static``), as the orchestrator's. With the ``realistic`` profile the object is
+off the expected spot by up to 3 cm and the believed camera poses are off by millimetres, so the scans
+are aimed off-centre as they would be in a real cell.
+
 Deterministic for a seed: the same call gives byte-identical images.
 """
 
@@ -62,18 +69,51 @@ def camera_look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
     return T
 
 
+LOCATE_DISTANCE_M, LOCATE_ELEVATION_DEG = 0.45, 55.0  # the orchestrator's locate pose (ScanGeometry)
+LOCATE_SEQ = 1_000_000  # locate frames' sequence numbers start here (scan frames keep 0, 1, 2, ...)
+
+
+def locate_pose(expected_xy: np.ndarray, scan_poses: ScanPoses = ScanPoses()) -> np.ndarray:
+    """The locate camera pose: from the front, high enough to see the table around where the object is
+    expected, looking at 5 cm above the table there."""
+    target = np.array([expected_xy[0], expected_xy[1], 0.05])
+    el, az = np.radians(LOCATE_ELEVATION_DEG), np.radians(scan_poses.front_azimuth_deg)
+    eye = target + LOCATE_DISTANCE_M * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    return camera_look_at(eye, target)
+
+
+def estimate_object(frame: RGBDFrame) -> tuple[np.ndarray, float] | None:
+    """(footprint centre in base, height) of the object the frame looks at, by the static stage from the
+    frame's *believed* pose, as the orchestrator estimates it; None when the stage finds no object."""
+    from common.errors import ObjscanError
+    from services.registration.static import register_view
+
+    try:
+        result = register_view([frame])
+    except ObjscanError:
+        return None
+    return np.asarray(result.object_center, dtype=np.float64), float(result.object_height)
+
+
 def simulated_views(object_name: str, *, views: int = 12, scans_per_view: int = 3,
                     profile: str | ErrorProfile = "ideal", seed: int = 0, intrinsics: Intrinsics | None = None,
                     turn_deg: float = 30.0, object_pose: np.ndarray | None = None,
-                    scan_poses: ScanPoses = ScanPoses(), world: World | None = None) -> list[list[RGBDFrame]]:
+                    scan_poses: ScanPoses = ScanPoses(), world: World | None = None,
+                    plan_from: str = "estimate") -> list[list[RGBDFrame]]:
     """Scan ``object_name`` (HOPE name or mesh path) over ``views`` views of ``scans_per_view`` frames,
     hand-turning it by ``turn_deg`` between views.
 
     Returns ``frames[view][scan]``. Each frame's ``T_base_camera`` is the believed pose and
     ``T_base_camera_true`` the truth; ``meta`` holds ``view``, ``scan``, ``commanded_turn_deg`` (cumulative,
     ``turn_deg * view``), ``achieved_turn_deg_true`` (cumulative, ground truth), ``T_base_object_true``,
-    ``object``, ``profile`` and ``seed``. Default intrinsics: D435 640x480.
+    ``object``, ``profile``, ``seed`` and ``planned_center`` (the point the scan poses aim at; with
+    ``plan_from="estimate"``, the default, it comes from the previous view or a locate frame, see the
+    module docstring; ``"truth"`` aims at the true centre, for tests of the renderer only).
+    Default intrinsics: D435 640x480.
     """
+    if plan_from not in ("estimate", "truth"):
+        raise SimInputError("plan_from must be 'estimate' or 'truth'", code="bad_value",
+                            detail={"plan_from": plan_from})
     if views < 1 or scans_per_view < 1:
         raise SimInputError("views and scans_per_view must be at least 1", code="bad_value",
                             detail={"views": views, "scans_per_view": scans_per_view})
@@ -82,20 +122,30 @@ def simulated_views(object_name: str, *, views: int = 12, scans_per_view: int = 
     if world is None:
         world = World(object_name, profile=prof, seed=seed,
                       object_pose=default_object_pose() if object_pose is None else object_pose)
-    height = world.obj.height
     out: list[list[RGBDFrame]] = []
     achieved_total = 0.0
     seq = 0
+    expected = world.initial_pose[:2, 3]
+    estimate = None
+    if plan_from == "estimate":
+        estimate = estimate_object(world.render_frame(locate_pose(expected, scan_poses), K, LOCATE_SEQ))
     for v in range(views):
         if v > 0:
             achieved_total += hand_turn(world, turn_deg, None)
-        T_obj = world.true_object_pose()
-        center = T_obj[:3, 3] + np.array([0.0, 0.0, height / 2.0])
+            if plan_from == "estimate":
+                estimate = estimate_object(out[-1][0]) or estimate
+        if plan_from == "truth":
+            center = world.true_object_pose()[:3, 3] + np.array([0.0, 0.0, world.obj.height / 2.0])
+        elif estimate is None:  # nothing found yet: aim where the object is expected, 5 cm up
+            center = np.array([expected[0], expected[1], 0.05])
+        else:
+            center = estimate[0] + np.array([0.0, 0.0, estimate[1] / 2.0])
         frames = []
         for j, T_cam in enumerate(scan_poses.poses(center, scans_per_view)):
             frame = world.render_frame(T_cam, K, seq, stamp=seq / 30.0)
             frame.meta.update({"view": v, "scan": j, "commanded_turn_deg": turn_deg * v,
-                               "achieved_turn_deg_true": achieved_total, "seed": world.seed})
+                               "achieved_turn_deg_true": achieved_total, "seed": world.seed,
+                               "planned_center": center.tolist()})
             frames.append(frame)
             seq += 1
         out.append(frames)

@@ -38,9 +38,13 @@ class D435Noise:
     flying_pixel_prob: float = 0.25  # edge pixels blended between foreground and background
     color_sigma: float = 2.0  # per-channel colour noise, in 8-bit levels
     exposure_jitter: float = 0.01  # per-frame relative gain change (auto exposure)
+    # pixels the second (right) imager cannot see have no depth: the band left of foreground edges and the
+    # left image border (off by default: the defaults are the as-documented model; see ``calibrated``)
+    stereo_occlusion: bool = False
+    occlusion_dropout_prob: float = 1.0  # occluded pixels left invalid (the rest the matcher fills correctly)
 
     def __post_init__(self) -> None:
-        probs = (self.dropout_prob, self.edge_dropout_prob, self.flying_pixel_prob)
+        probs = (self.dropout_prob, self.edge_dropout_prob, self.flying_pixel_prob, self.occlusion_dropout_prob)
         if any(not 0.0 <= p <= 1.0 for p in probs) or self.edge_dropout_prob + self.flying_pixel_prob > 1.0:
             raise SimInputError("noise probabilities must lie in [0, 1] (edge dropout + flying <= 1)",
                                 code="bad_value")
@@ -55,10 +59,25 @@ class D435Noise:
         return cls(subpixel=0.0, dropout_prob=0.0, edge_dropout_prob=0.0, flying_pixel_prob=0.0,
                    color_sigma=0.0, exposure_jitter=0.0)
 
+    @classmethod
+    def calibrated(cls) -> D435Noise:
+        """The model fitted to real RealSense frames (``objscan bench sensor``, docs/sim.md "Calibration").
+
+        Measured on 9 real 640x480 tabletop frames: the table's residual is ~1.5x the documented z^2 noise
+        (subpixel 0.123 px, not 0.08), the invalid band left of foreground objects is the stereo occlusion
+        (geometry alone matches its width, so few extra edge dropouts), flying pixels are rarer than the
+        default assumed and random holes 6x rarer.
+        """
+        return cls(**CALIBRATED)
+
     def depth_sigma(self, z: np.ndarray | float, fx: float) -> np.ndarray | float:
         """Standard deviation of the depth noise (m) at depth ``z`` (m) for focal length ``fx`` (px)."""
         return np.square(z) * self.subpixel / (fx * self.baseline_m)
 
+
+# fitted by ``bench/sensor.py`` (fit_noise) on ../shared/data/rgbd/tabletop_uoc; re-run it to refit
+CALIBRATED: dict = {"subpixel": 0.123, "edge_dropout_prob": 0.019, "flying_pixel_prob": 0.093,
+                     "dropout_prob": 0.0005, "stereo_occlusion": True}
 
 _BANK_SIZE = 1 << 22
 _BANKS: dict[str, np.ndarray] = {}
@@ -146,6 +165,36 @@ def _depth_edges(depth, thr, edges, target):  # pragma: no cover - compiled
                 edges[r, c] = True
 
 
+def occluded(depth_m: np.ndarray, fx: float, baseline_m: float) -> np.ndarray:
+    """Pixels the right imager does not see: another surface nearer the camera hides them from it, or they
+    fall outside its image (the invalid band at the left border of D4xx depth).
+
+    The depth imager is the left one; the right one sits ``baseline_m`` along +x. A pixel at column ``u``
+    with disparity ``f b / z`` appears at ``u - f b / z`` in the right image; it is hidden when some pixel to
+    its right lands at or left of that (nearer surfaces shift more), or when that is left of column 0.
+    """
+    depth = np.ascontiguousarray(depth_m, dtype=np.float32)
+    out = np.zeros(depth.shape, dtype=np.bool_)
+    _occluded(depth, np.float32(fx * baseline_m), out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _occluded(depth, fb, out):  # pragma: no cover - compiled
+    h, w = depth.shape
+    for r in range(h):
+        lowest = np.float32(1e9)
+        for c in range(w - 1, -1, -1):
+            d = depth[r, c]
+            if d <= 0:
+                continue
+            xr = np.float32(c) - fb / d
+            if xr < -0.5 or xr > lowest:
+                out[r, c] = True
+            if xr < lowest:
+                lowest = xr
+
+
 def _edge_artifacts(depth: np.ndarray, noise: D435Noise, rng: np.random.Generator) -> None:
     """Flying pixels and dropouts at depth discontinuities, in place.
 
@@ -168,15 +217,21 @@ def apply_d435_noise(depth_m: np.ndarray, color: np.ndarray, fx: float, noise: D
                      rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Degrade perfect depth (float metres, 0 = no hit) and colour (uint8) as a D435 would.
 
-    Returns (depth in metres, float32, 0 = no data; colour uint8). Order: flying pixels and dropouts at
-    edges, random dropouts, z^2 stereo noise, then the range limits.
+    Returns (depth in metres, float32, 0 = no data; colour uint8). Order: stereo occlusion (on the
+    perfect depth), flying pixels and dropouts at edges, random dropouts, z^2 stereo noise, then the range
+    limits.
     """
     if depth_m.ndim != 2 or color.shape[:2] != depth_m.shape:
         raise SimInputError("depth must be (H, W) and colour (H, W, 3) of the same size", code="bad_shape")
     depth = np.asarray(depth_m, dtype=np.float32).copy()
     h, w = depth.shape
+    hidden = occluded(depth, fx, noise.baseline_m) if noise.stereo_occlusion else None
     if noise.flying_pixel_prob > 0 or noise.edge_dropout_prob > 0:
         _edge_artifacts(depth, noise, rng)
+    if hidden is not None:
+        if noise.occlusion_dropout_prob < 1.0:
+            hidden &= noise_field("uniform", (h, w), rng) < noise.occlusion_dropout_prob
+        depth[hidden] = 0.0
     if noise.dropout_prob > 0:
         depth[noise_field("uniform", (h, w), rng) < noise.dropout_prob] = 0.0
     if noise.subpixel > 0:

@@ -222,7 +222,7 @@ def _number(params: dict, name: str, default: float, lo: float, hi: float) -> fl
 def main() -> None:
     p = service_arg_parser("objscan digital twin (simulated table, object, arm, gripper and D435)")
     p.add_argument("--object", default="milk", help="HOPE object name or a mesh path (default: %(default)s)")
-    p.add_argument("--profile", default="ideal", help="error profile: ideal | hand-turned | robot-turned")
+    p.add_argument("--profile", default="ideal", help="error profile: ideal | hand-turned | realistic | robot-turned")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--physics", default="geometric", choices=["geometric", "mujoco"],
                    help="grasp/set-down model: geometric checker + drawn errors, or MuJoCo contact physics")

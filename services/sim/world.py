@@ -113,6 +113,9 @@ class World:
             self.hand_eye_error = self.profile.draw_hand_eye_error(rng)
             self.turn_gain = self.profile.draw_turn_gain(rng)
             self.T_base_object = self._initial_pose.copy()
+            # the profile's placement: the object stands off where it is expected (drawn last: the
+            # session's earlier draws stay as they were for profiles without it)
+            self.T_base_object[:2, 3] += self.profile.draw_object_offset(rng)
             self.attached = False
             self.T_gripper_object: np.ndarray | None = None
             self._yaw_at_grasp = 0.0
@@ -129,6 +132,11 @@ class World:
 
     def _rng(self, stream: int, index: int, extra: int = 0) -> np.random.Generator:
         return np.random.default_rng(np.random.SeedSequence([self.seed, stream, int(index), int(extra)]))
+
+    @property
+    def initial_pose(self) -> np.ndarray:
+        """Where the object is meant to stand, before the profile's placement offset: where a cell expects it."""
+        return self._initial_pose.copy()
 
     def true_object_pose(self) -> np.ndarray:
         """T_base_object as it really is (ground truth)."""
@@ -191,7 +199,7 @@ class World:
         rng = self._rng(_STREAM_FRAME, seq, pose_key)
         with self._lock:
             scene = self.scene()
-            believed = T_true @ self.profile.draw_joint_jitter(rng) @ self.hand_eye_error
+            believed = T_true @ self.profile.draw_frame_pose_error(rng) @ self.hand_eye_error
             self.counts["frames"] += 1
         return render(scene, T_true, K, noise=self.profile.camera, rng=rng), believed
 
