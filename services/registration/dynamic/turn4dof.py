@@ -33,9 +33,14 @@ class TurnSearchConfig:
     yaw_step_deg: float = 7.5
     yaw_range_deg: tuple[float, float] = (-180.0, 180.0)
     sweep_voxel: float = 0.005  # m; the sweep scores a cloud this coarse
+    sweep_shift_corr: float = 0.025  # m; each yaw first gets its shift by a few ICP steps with this reach
+    sweep_shift_iterations: int = 6  # (partial views put the two centre estimates 1-2 cm apart)
     score_distance: float = 0.006  # m; sweep inlier distance
     color_weight: float = 0.5  # score = fitness + color_weight * colour fitness
-    color_tolerance: float = 40.0  # sum of |RGB| differences for two colours to agree (8-bit)
+    # two colours agree when their chromaticities (r, g, b) / (r + g + b) differ by at most this (L1) and
+    # their brightnesses by at most a factor brightness_ratio: shading changes as a face turns to the light
+    color_tolerance: float = 0.08
+    brightness_ratio: float = 2.0
     keep: int = 4  # hypotheses refined by ICP
     icp_voxels: tuple[float, ...] = (0.005, 0.003, 0.002)
     icp_corr_factor: tuple[float, ...] = (3.0, 2.0, 1.5)  # max correspondence = factor x voxel
@@ -87,28 +92,38 @@ class _Target:
     def __init__(self, cloud: Cloud, R_f: np.ndarray, center: np.ndarray):
         self.xyz = (cloud.xyz.astype(np.float64) - center) @ R_f
         self.normals = cloud.normals.astype(np.float64) @ R_f
-        self.rgb = cloud.rgb.astype(np.int16)
+        self.rgb = chroma(cloud.rgb)
         self.tree = cKDTree(self.xyz)
 
 
-def _score(src_xyz: np.ndarray, src_rgb: np.ndarray, tgt: _Target, distance: float, tol: float
-           ) -> tuple[float, float, float]:
-    """(fitness, inlier rmse, colour fitness) of source points already in the target's local frame."""
+def chroma(rgb: np.ndarray) -> np.ndarray:
+    """(N, 4): chromaticity r, g, b (summing to 1) and log-brightness, for shading-tolerant colour checks."""
+    c = np.asarray(rgb, dtype=np.float64) + 1.0
+    s = c.sum(axis=1, keepdims=True)
+    return np.column_stack([c / s, np.log(s[:, 0])])
+
+
+def _score(src_xyz: np.ndarray, src_rgb: np.ndarray, tgt: _Target, distance: float, tol: float,
+           ratio: float = 2.0) -> tuple[float, float, float]:
+    """(fitness, inlier rmse, colour fitness) of source points already in the target's local frame;
+    ``src_rgb`` is ``chroma`` of the source colours."""
     d, j = tgt.tree.query(src_xyz, k=1, distance_upper_bound=distance)
     inl = np.isfinite(d)
     n = len(src_xyz)
     if n == 0 or not inl.any():
         return 0.0, np.inf, 0.0
-    agree = np.abs(src_rgb[inl] - tgt.rgb[j[inl]]).sum(axis=1) <= tol
+    a, b = src_rgb[inl], tgt.rgb[j[inl]]
+    agree = (np.abs(a[:, :3] - b[:, :3]).sum(axis=1) <= tol) & (np.abs(a[:, 3] - b[:, 3]) <= np.log(ratio))
     return float(inl.sum()) / n, float(np.sqrt(np.mean(d[inl] ** 2))), float(agree.sum()) / n
 
 
 def icp_4dof(src: np.ndarray, tgt: _Target, theta: float, t: np.ndarray, max_corr: float, iterations: int,
-             point_weight: float) -> tuple[float, np.ndarray]:
+             point_weight: float, fixed_yaw: bool = False) -> tuple[float, np.ndarray]:
     """4-DoF ICP in the local frame: source points ``src`` (N, 3) moved by Rz(theta), t onto the target.
 
     Each iteration linearises the yaw and solves the weighted least squares of point-to-plane residuals
-    plus ``point_weight`` x point-to-point residuals for (dtheta, dtx, dty, dtz).
+    plus ``point_weight`` x point-to-point residuals for (dtheta, dtx, dty, dtz); ``fixed_yaw`` solves
+    the shift only (the sweep: each hypothesis keeps its yaw).
     """
     t = np.asarray(t, dtype=float).copy()
     for _ in range(iterations):
@@ -131,8 +146,12 @@ def icp_4dof(src: np.ndarray, tgt: _Target, theta: float, t: np.ndarray, max_cor
             rows.append(w * np.column_stack([dp[:, k], np.tile(e, (len(p), 1))]))
             rhs.append(-w * (p[:, k] - q[:, k]))
         A, b = np.vstack(rows), np.concatenate(rhs)
-        x, *_ = np.linalg.lstsq(A, b, rcond=None)
-        dth, dt = float(x[0]), x[1:]
+        if fixed_yaw:
+            x, *_ = np.linalg.lstsq(A[:, 1:], b, rcond=None)
+            dth, dt = 0.0, x
+        else:
+            x, *_ = np.linalg.lstsq(A, b, rcond=None)
+            dth, dt = float(x[0]), x[1:]
         # compose: new = Rz(dθ) (Rz(θ) s + t) + dt
         theta += dth
         t = _rot_z(dth) @ t + dt
@@ -155,13 +174,17 @@ def search_turn(source: Cloud, target: Cloud, axis: np.ndarray, center: np.ndarr
 
     coarse_s, coarse_t = src0.downsampled(cfg.sweep_voxel), target.downsampled(cfg.sweep_voxel)
     tgt = _Target(coarse_t, R_f, center)
-    s_xyz, s_rgb = local(coarse_s), coarse_s.rgb.astype(np.int16)
+    s_xyz, s_rgb = local(coarse_s), chroma(coarse_s.rgb)
     lo, hi = cfg.yaw_range_deg
     yaws = np.arange(lo, hi, cfg.yaw_step_deg)
-    sweep = []
+    sweep, starts = [], []
     for yaw in yaws:
-        f, _, cf = _score(s_xyz @ _rot_z(np.radians(yaw)).T, s_rgb, tgt, cfg.score_distance, cfg.color_tolerance)
+        th, t = icp_4dof(s_xyz, tgt, np.radians(yaw), np.zeros(3), cfg.sweep_shift_corr, cfg.sweep_shift_iterations,
+                         cfg.point_weight, fixed_yaw=True)
+        f, _, cf = _score(s_xyz @ _rot_z(th).T + t, s_rgb, tgt, cfg.score_distance, cfg.color_tolerance,
+                           cfg.brightness_ratio)
         sweep.append((float(yaw), f + cfg.color_weight * cf))
+        starts.append((th, t))
     # best few hypotheses, at least 3 steps apart (neighbours of a peak are the same basin)
     order = sorted(range(len(sweep)), key=lambda i: -sweep[i][1])
     picked: list[int] = []
@@ -174,14 +197,14 @@ def search_turn(source: Cloud, target: Cloud, axis: np.ndarray, center: np.ndarr
     for v, k in zip(cfg.icp_voxels, cfg.icp_corr_factor, strict=True):
         s_l = src0.downsampled(v)
         levels.append((local(s_l), _Target(target.downsampled(v), R_f, center), k * v))
-    fin_s, fin_rgb = levels[-1][0], src0.downsampled(cfg.icp_voxels[-1]).rgb.astype(np.int16)
+    fin_s, fin_rgb = levels[-1][0], chroma(src0.downsampled(cfg.icp_voxels[-1]).rgb)
     best = None
     for i in picked:
-        theta, t = np.radians(sweep[i][0]), np.zeros(3)
+        theta, t = starts[i]
         for s_l, t_l, corr in levels:
             theta, t = icp_4dof(s_l, t_l, theta, t, corr, cfg.icp_iterations, cfg.point_weight)
         f, rmse, cf = _score(fin_s @ _rot_z(theta).T + t, fin_rgb, levels[-1][1], cfg.final_distance,
-                             cfg.color_tolerance)
+                             cfg.color_tolerance, cfg.brightness_ratio)
         key = f + cfg.color_weight * cf
         if best is None or key > best[0]:
             best = (key, theta, t, f, rmse, cf)
@@ -193,6 +216,38 @@ def search_turn(source: Cloud, target: Cloud, axis: np.ndarray, center: np.ndarr
     T = T_local @ prior
     yaw = float((np.degrees(theta) + 180.0) % 360.0 - 180.0)
     return TurnResult(T=T, yaw_deg=yaw, shift=R_f @ t, fitness=f, rmse=rmse, color_fitness=cf, sweep=sweep)
+
+
+def project_to_turn(T: np.ndarray, axis: np.ndarray, center: np.ndarray) -> np.ndarray:
+    """The 4-DoF transform nearest ``T``: its yaw about ``axis`` (tilt dropped), moving ``center`` where
+    ``T`` moves it."""
+    from common.geometry import yaw_deg_about
+
+    c = np.asarray(center, dtype=float).reshape(3)
+    R = rotation_about_axis(axis, np.radians(yaw_deg_about(axis, T[:3, :3])))
+    return make_transform(R, T[:3, :3] @ c + T[:3, 3] - R @ c)
+
+
+def refine_turn(source: Cloud, target: Cloud, axis: np.ndarray, center: np.ndarray, T_init: np.ndarray,
+                config: TurnSearchConfig | None = None) -> TurnResult:
+    """4-DoF ICP (yaw + shift) from ``T_init`` projected to 4-DoF: a pair result without tilt."""
+    cfg = config or TurnSearchConfig()
+    center = np.asarray(center, dtype=float).reshape(3)
+    prior = project_to_turn(np.asarray(T_init, dtype=float), axis, center)
+    R_f = _axis_frame(axis)
+    src0 = source.transformed(prior)
+    theta, t = 0.0, np.zeros(3)
+    tgt = None
+    for v, k in zip(cfg.icp_voxels[1:], cfg.icp_corr_factor[1:], strict=True):
+        tgt = _Target(target.downsampled(v), R_f, center)
+        s_l = (src0.downsampled(v).xyz.astype(np.float64) - center) @ R_f
+        theta, t = icp_4dof(s_l, tgt, theta, t, k * v, cfg.icp_iterations, cfg.point_weight)
+    fin = src0.downsampled(cfg.icp_voxels[-1])
+    f, rmse, cf = _score(((fin.xyz.astype(np.float64) - center) @ R_f) @ _rot_z(theta).T + t, chroma(fin.rgb), tgt,
+                         cfg.final_distance, cfg.color_tolerance, cfg.brightness_ratio)
+    R = R_f @ _rot_z(theta) @ R_f.T
+    T = make_transform(R, center - R @ center + R_f @ t) @ prior
+    return TurnResult(T=T, yaw_deg=float(np.degrees(theta)), shift=R_f @ t, fitness=f, rmse=rmse, color_fitness=cf)
 
 
 def known_turn(axis: np.ndarray, center: np.ndarray, yaw_deg: float, shift: np.ndarray) -> np.ndarray:
