@@ -103,3 +103,20 @@ def test_a_sequence_without_a_table_is_a_clear_error(tmp_path):
         import_sequence(tmp_path, tmp_path / "out", parse_intrinsics("150,150,80,60"))
     assert exc.value.code == "no_table"
     assert exc.value.detail["planes"][0]["rejected"].startswith("tilted")
+
+
+@pytest.mark.timeout(120)
+def test_a_realsense_recording_is_read_frame_by_frame(tmp_path):
+    """A .db3 recorded from the software D435: every frame, in order, with the recording's intrinsics."""
+    pytest.importorskip("pyrealsense2")
+    from services.camera.realsense.software import record_db3
+    from tests.camera.test_realsense_playback import SPEC, _frames
+
+    path = record_db3(tmp_path / "turntable.db3", _frames(), SPEC)
+    frames = read_frames(path)
+    assert len(frames) == 3
+    assert [int(f.color[2, 2, 0]) for f in frames] == [0, 1, 2]  # the per-frame corner tags, in order
+    assert [f.seq for f in frames] == [0, 1, 2]
+    assert frames[0].intrinsics.fx == pytest.approx(SPEC.color_intrinsics.fx, rel=1e-5)
+    assert frames[0].depth_scale == pytest.approx(SPEC.depth_scale, rel=1e-5)
+    assert all(np.array_equal(f.T_base_camera, np.eye(4)) for f in frames)  # the pose comes from the table later
