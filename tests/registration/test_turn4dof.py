@@ -106,3 +106,19 @@ def test_turn_search_recovers_a_known_yaw_and_shift_on_a_real_view(castard_views
         dt, dr = transform_error(res.T, invert(T_move))
         assert dr < 1.0 and dt < 0.003, (yaw, dt, dr, res.yaw_deg)
         assert abs(res.yaw_deg + yaw) < 1.0
+
+
+def test_the_turn_search_config_travels_to_workers():
+    """Pair jobs go to registration workers over the wire: the nested 4-DoF config must survive the trip."""
+    from common.codec import decode, encode
+    from services.registration.pair_wire import pair_job_from_message, pair_job_message
+
+    rng = np.random.default_rng(0)
+    cloud = Cloud(rng.random((60, 3)).astype(np.float32), rng.integers(0, 255, (60, 3)).astype(np.uint8),
+                  np.tile(np.float32([0, 0, 1]), (60, 1)))
+    cfg = PairConfig(turn_search=TurnSearchConfig(yaw_step_deg=5.0, icp_voxels=(0.004, 0.002),
+                                                  icp_corr_factor=(2.0, 1.5)), max_turn_tilt_deg=8.0)
+    job = PairJob(index=3, source_view=4, target_view=3, source=cloud, target=cloud, center=np.zeros(3),
+                  axis=np.array([0.0, 0.0, 1.0]), config=cfg)
+    back = pair_job_from_message(decode(encode(pair_job_message(job))))
+    assert back.config == cfg and isinstance(back.config.turn_search, TurnSearchConfig)
