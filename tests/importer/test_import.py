@@ -44,6 +44,7 @@ def test_castard_imports_with_base_from_the_table_and_the_direction_found(tmp_pa
     assert abs(f.T_base_camera[2, 2]) < 0.3  # the optical axis is nearly level
 
 
+@pytest.mark.slow  # ~60 s on the shared machine: 4 full-circle turn searches
 def test_estimated_turns_are_consistent_clockwise_steps(tmp_path):
     seq = shared_data("real_sequences", "castard_d415")
     frames = sorted((seq / "rgb").iterdir())[:5]
