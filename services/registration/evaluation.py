@@ -192,3 +192,26 @@ def _mesh_distances(points: np.ndarray, mesh: o3d.geometry.TriangleMesh) -> np.n
 
 def _to_o3d(points: np.ndarray) -> o3d.geometry.PointCloud:
     return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(points, dtype=np.float64)))
+
+
+def view_agreement(posed_views: list[np.ndarray], *, near: float = 0.010, close: float = 0.003) -> list[dict]:
+    """Self-consistency of a model without ground truth: how well each view agrees with the others.
+
+    For view k (points already posed in the model frame), the points that have a point of *another* view
+    within ``near`` are the ones the others also saw; the agreement is the share of those within ``close``.
+    A misplaced view has its overlap ``near`` but not ``close`` and scores low. Returns, per view,
+    ``{"view", "points", "overlapping", "agreement"}`` (agreement None when nothing overlaps).
+    """
+    out = []
+    trees = [cKDTree(np.asarray(v, dtype=np.float64)) for v in posed_views]
+    for k, pts in enumerate(posed_views):
+        pts = np.asarray(pts, dtype=np.float64)
+        d = np.full(len(pts), np.inf)
+        for j, tree in enumerate(trees):
+            if j != k and len(pts):
+                dj, _ = tree.query(pts, k=1, distance_upper_bound=near)
+                d = np.minimum(d, dj)
+        overlapping = int(np.sum(d <= near))
+        agree = float(np.sum(d <= close)) / overlapping if overlapping else None
+        out.append({"view": k, "points": int(len(pts)), "overlapping": overlapping, "agreement": agree})
+    return out

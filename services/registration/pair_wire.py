@@ -16,6 +16,7 @@ from common.errors import InvalidRequest
 from common.messages import PointCloud
 from services.registration.dynamic.pair import PairConfig, PairJob, PairResult
 from services.registration.dynamic.preprocess import Cloud
+from services.registration.dynamic.turn4dof import TurnSearchConfig
 
 
 @dataclass(kw_only=True)
@@ -63,16 +64,41 @@ def _cloud(p: PointCloud) -> Cloud:
     return Cloud(np.array(p.xyz, np.float32), np.array(rgb, np.uint8), np.array(nrm, np.float32))
 
 
+def _lists(d: dict) -> dict:
+    """A config map with tuples as lists, nested maps too (what msgpack carries)."""
+    return {k: _lists(v) if isinstance(v, dict) else list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+
+
 def _config_dict(cfg: PairConfig) -> dict:
-    return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(cfg).items()}
+    return _lists(dataclasses.asdict(cfg))
+
+
+def _rebuild(cls: type, d: dict, what: str):  # noqa: ANN202
+    """A frozen config dataclass from its wire map: lists back to tuples, nested configs rebuilt."""
+    if not isinstance(d, dict):
+        raise InvalidRequest(f"{what} must be a map")
+    known = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = set(d) - set(known)
+    if unknown:
+        raise InvalidRequest(f"unknown {what} keys {sorted(unknown)}")
+    out = {}
+    for k, v in d.items():
+        if k in _NESTED.get(cls, {}):
+            v = _rebuild(_NESTED[cls][k], v, f"{what}.{k}")
+        elif isinstance(v, list):
+            v = tuple(v)
+        out[k] = v
+    try:
+        return cls(**out)
+    except (TypeError, ValueError) as exc:
+        raise InvalidRequest(f"bad {what}: {exc}") from None
+
+
+_NESTED: dict[type, dict[str, type]] = {PairConfig: {"turn_search": TurnSearchConfig}}
 
 
 def _config(d: dict) -> PairConfig:
-    known = {f.name: f for f in dataclasses.fields(PairConfig)}
-    unknown = set(d) - set(known)
-    if unknown:
-        raise InvalidRequest(f"unknown pair config keys {sorted(unknown)}")
-    return PairConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+    return _rebuild(PairConfig, d, "pair config")
 
 
 def pair_job_message(job: PairJob) -> PairJobMessage:

@@ -39,6 +39,7 @@ def reconstruct(
     config: StaticConfig | None = None,
     progress: Progress | None = None,
     workers: int | None = None,
+    dynamic: Any = None,
 ) -> dict[str, Any]:
     """Run static registration on every view of ``session_dir``; write PLYs and ``report.json`` to ``out_dir``.
 
@@ -47,7 +48,8 @@ def reconstruct(
     (views, then the dynamic stage's pair jobs); ``1`` runs everything here. The default
     (``default_workers``) is one per core from 4 cores up and 1 below.
     The result does not depend on ``workers``: each view and each pair job is computed by the same
-    deterministic function wherever it runs. Returns the report (also written as JSON). Raises
+    deterministic function wherever it runs. ``dynamic`` (a ``DynamicConfig``) overrides the dynamic
+    stage's defaults. Returns the report (also written as JSON). Raises
     ``SessionFolderError`` only when the session itself is unreadable; per-view failures are in the report.
     """
     cfg = config or StaticConfig()
@@ -84,7 +86,8 @@ def reconstruct(
             "summary": _summary(views_report, time.perf_counter() - t_start),
         }
         map_pairs = (lambda jobs: list(pool.map(register_pair, jobs))) if pool is not None else None
-        report["model"] = run_dynamic_stage(results, session, out, report, progress, map_pairs=map_pairs)
+        report["model"] = run_dynamic_stage(results, session, out, report, progress, map_pairs=map_pairs,
+                                            config=dynamic)
     atomic_write_json(out / "report.json", report)
     return report
 
@@ -161,6 +164,7 @@ def run_dynamic_stage(
     report: dict[str, Any],
     progress: Progress | None = None,
     map_pairs: MapPairs | None = None,
+    config: Any = None,
 ) -> dict[str, Any] | None:
     """Dynamic registration of the views into one model: writes ``out_dir/model.ply``, returns its figures.
 
@@ -175,7 +179,7 @@ def run_dynamic_stage(
     views = [view_from_static(results[k], session.commanded_turn_deg(k), index=k) for k in order]
     say = (lambda stage, info: progress({"stage": f"dynamic:{stage}", **info})) if progress else None
     try:
-        model = build_model(views, DynamicConfig(), map_pairs=map_pairs, progress=say)
+        model = build_model(views, config or DynamicConfig(), map_pairs=map_pairs, progress=say)
     except ObjscanError as exc:
         return {"error": {"code": exc.code, "message": exc.message, "detail": exc.detail},
                 "views_used": order, "seconds": round(time.perf_counter() - t0, 4)}

@@ -28,6 +28,7 @@ from services.sim.sensor_model import D435Noise, apply_d435_noise
 LABEL_NONE = 0
 LABEL_TABLE = 1
 LABEL_OBJECT = 2
+LABEL_EXTRA = 3  # extra scene geometry (a wall, a second box): clutter the object must be isolated from
 #: Colour of pixels whose ray hits nothing (the far room): dark grey, no depth.
 BACKGROUND_RGB = np.array([55, 58, 62], dtype=np.uint8)
 
@@ -44,6 +45,38 @@ class TableSpec:
     base_rgb: tuple[int, int, int] = (176, 146, 110)  # light wood
     grain_contrast: float = 22.0  # 8-bit levels of the wood grain and blotches (what colour ICP locks on)
     texture_seed: int = 7
+
+
+@dataclass(frozen=True)
+class SceneBox:
+    """Extra geometry for the twin's scene: a flat-coloured box in ``base`` (a wall, a second object).
+
+    Real cells are not just a table and one object; walls, shelves and other boxes are in view, and the
+    registration must find the table and the right object among them. ``yaw_deg`` turns the box about
+    base z through its centre.
+    """
+
+    center: tuple[float, float, float]
+    size: tuple[float, float, float]
+    yaw_deg: float = 0.0
+    rgb: tuple[int, int, int] = (200, 200, 195)
+
+    def mesh(self) -> o3d.geometry.TriangleMesh:
+        sx, sy, sz = self.size
+        if min(sx, sy, sz) <= 0:
+            raise SimInputError("a scene box needs a positive size", code="bad_value", detail={"size": self.size})
+        m = o3d.geometry.TriangleMesh.create_box(sx, sy, sz)
+        m.translate((-sx / 2, -sy / 2, -sz / 2))
+        c, s = np.cos(np.radians(self.yaw_deg)), np.sin(np.radians(self.yaw_deg))
+        m.rotate(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), center=(0.0, 0.0, 0.0))
+        m.translate(self.center)
+        return m
+
+
+def wall_behind(object_xy: tuple[float, float] = (0.5, 0.0), distance: float = 0.3) -> SceneBox:
+    """A wall ``distance`` behind an object at ``object_xy``, as seen from the arm (farther along +x)."""
+    return SceneBox(center=(object_xy[0] + distance + 0.01, object_xy[1], 0.4), size=(0.02, 1.6, 0.8),
+                    rgb=(214, 210, 198))
 
 
 @dataclass(frozen=True)
@@ -104,9 +137,12 @@ class RenderScene:
     """
 
     def __init__(self, obj: SimObject | None, T_base_object: np.ndarray | None = None, *,
-                 table: TableSpec | None = TableSpec(), lighting: Lighting = Lighting()):
+                 table: TableSpec | None = TableSpec(), lighting: Lighting = Lighting(),
+                 extras: tuple[SceneBox, ...] = ()):
         self.obj = obj
         self.table = table
+        self.extras = tuple(extras)
+        self.extra_gids: dict[int, SceneBox] = {}
         self.lighting = lighting
         self.T_base_object = check_transform(np.eye(4) if T_base_object is None else T_base_object, "T_base_object")
         self.scene = o3d.t.geometry.RaycastingScene()
@@ -120,6 +156,9 @@ class RenderScene:
         if table is not None:
             gid = self.scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(table_mesh(table)))
             self.table_gid = int(gid)
+        for box in self.extras:
+            gid = self.scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(box.mesh()))
+            self.extra_gids[int(gid)] = box
         # Open3D commits (builds the BVH) lazily on the first query; do it here, once, so frames rendered
         # from several threads never race on it
         self.scene.cast_rays(o3d.core.Tensor(np.array([[0, 0, 0, 0, 0, 1]], dtype=np.float32)))
@@ -274,7 +313,8 @@ def _cast(scene: RenderScene, T: np.ndarray, dirs: np.ndarray, K: Intrinsics, fu
     origin = T[:3, 3].astype(np.float32)
     cast = np.ones(n, dtype=bool)
     table_hit = None
-    if scene.table is not None and origin[2] > 1e-6 and not full_cast:
+    # extra geometry can hide the table: then every ray goes through the BVH
+    if scene.table is not None and origin[2] > 1e-6 and not full_cast and not scene.extras:
         dz = dirs[:, 2]
         down = dz < -1e-9
         t = np.full(n, np.inf, dtype=np.float32)
@@ -321,6 +361,22 @@ def _cast(scene: RenderScene, T: np.ndarray, dirs: np.ndarray, K: Intrinsics, fu
         bary[idx] = ans["primitive_uvs"].numpy()
         normals[idx] = ans["primitive_normals"].numpy()
     return t_hit, gids, prims, bary, normals
+
+
+def _shade_extras(scene: RenderScene, gids: np.ndarray, normals: np.ndarray, dirs: np.ndarray,
+                  light: np.ndarray, color: np.ndarray, labels: np.ndarray) -> None:
+    """Flat Lambert shading and ``LABEL_EXTRA`` for pixels that hit extra boxes (the compiled pass leaves
+    them black and unlabelled)."""
+    for gid, box in scene.extra_gids.items():
+        sel = np.flatnonzero(gids == gid)
+        if sel.size == 0:
+            continue
+        n = normals[sel].astype(np.float64)
+        flip = np.einsum("ij,ij->i", n, dirs[sel]) > 0
+        n[flip] = -n[flip]
+        k = scene.lighting.ambient + scene.lighting.diffuse * np.clip(n @ light, 0.0, None)
+        color[sel] = np.clip(np.outer(k, box.rgb) + 0.5, 0, 255).astype(np.uint8)
+        labels[sel] = LABEL_EXTRA
 
 
 def render(scene: RenderScene, T_base_camera: np.ndarray, intrinsics: Intrinsics, *,
@@ -372,6 +428,8 @@ def render(scene: RenderScene, T_base_camera: np.ndarray, intrinsics: Intrinsics
              _ro(table_tex, np.uint8), float(x0), float(y0), float(texel), _ro(light, np.float64),
              float(scene.lighting.ambient), float(scene.lighting.diffuse), _ro(BACKGROUND_RGB, np.uint8),
              color, labels, depth_true)
+    if scene.extra_gids:
+        _shade_extras(scene, gids, normals, dirs, light, color, labels)
     depth_true = depth_true.reshape(h, w)
     color = color.reshape(h, w, 3)
     labels = labels.reshape(h, w)

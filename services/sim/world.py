@@ -28,7 +28,7 @@ from services.sim.errors import SimError, SimInputError, check_transform
 from services.sim.gripper import GraspChecker, GraspOutcome, GripperSpec
 from services.sim.physics import PHYSICS_MODES, PhysicsConfig, PhysicsScene, tilt_deg
 from services.sim.profiles import ErrorProfile, get_profile
-from services.sim.render import RenderResult, RenderScene, TableSpec, render
+from services.sim.render import RenderResult, RenderScene, SceneBox, TableSpec, render
 from services.sim.sensor_model import d435_intrinsics
 
 #: Where an object stands by default (docs/conventions.md).
@@ -76,11 +76,13 @@ class World:
     def __init__(self, obj: SimObject | str, *, profile: ErrorProfile | str = "ideal", seed: int = 0,
                  object_pose: np.ndarray | None = None, table: TableSpec | None = None,
                  gripper: GripperSpec | None = None, scale: float | None = None, up_axis: str | None = None,
-                 physics: str = "geometric", physics_config: PhysicsConfig | None = None):
+                 physics: str = "geometric", physics_config: PhysicsConfig | None = None,
+                 extras: tuple[SceneBox, ...] = ()):
         """``obj`` is a ``SimObject`` or a HOPE name / mesh path (loaded with ``scale`` and ``up_axis``).
 
         ``physics``: "geometric" (the fast checker plus the profile's drawn slips, turn and placement errors)
         or "mujoco" (grasp, lift and set-down simulated with contact, ``services/sim/physics.py``).
+        ``extras`` adds static scene geometry (walls, other boxes) that is rendered but never grasped.
         """
         if physics not in PHYSICS_MODES:
             raise SimInputError(f"physics must be one of {', '.join(PHYSICS_MODES)}, got {physics!r}",
@@ -89,6 +91,7 @@ class World:
         self.obj = load_object(obj, scale=scale, up_axis=up_axis) if isinstance(obj, str) else obj
         self.profile = get_profile(profile)
         self.table = table or TableSpec()
+        self.extras = tuple(extras)
         self.gripper = gripper = gripper or GripperSpec()
         self._initial_pose = check_transform(default_object_pose() if object_pose is None else object_pose,
                                              "object_pose")
@@ -187,7 +190,7 @@ class World:
         """The ray-casting scene of the current state, rebuilt only when the object has moved."""
         with self._lock:
             if self._scene is None or not np.array_equal(self._scene.T_base_object, self.T_base_object):
-                self._scene = RenderScene(self.obj, self.T_base_object, table=self.table)
+                self._scene = RenderScene(self.obj, self.T_base_object, table=self.table, extras=self.extras)
             return self._scene
 
     def render(self, T_base_camera_true: np.ndarray, intrinsics: Intrinsics | None = None, seq: int = 0,

@@ -14,8 +14,13 @@ Two paths:
   ICP and point-to-plane at 1 mm).
 * ``mode="fast"`` (default, beyond the paper): pre-rotation already puts the views within the turn
   error (±5-15°) of each other, so local registration from that prior is tried first, from a few yaw
-  hypotheses about the turn axis, and verified; the global stage only runs when verification fails.
-  The result says which path won (``path``).
+  hypotheses about the turn axis, and verified. When verification fails, the global stages run in order:
+  first the **4-DoF turn search** (``turn4dof``: a full yaw sweep about the table normal scored on
+  geometry and colour, then ICP over yaw + shift only; an object on a table turns and slides, it does not
+  tumble), then, only if that is inconsistent too (a toppled or re-seated object), the **6-DoF** global
+  stage (4PCS / FPFH-RANSAC), which must beat the 4-DoF result by ``global_margin`` to replace it. The
+  result says which path won (``path``: ``prior`` / ``turn4dof`` / ``global``); ``detail.tried`` lists
+  every candidate with its figures.
 
 Candidates are scored by fitness (open3d's definition: inlier source points / source points, inlier
 distance ``fitness_distance``) on the full reduced clouds, or on the cropped clouds when ``crop``
@@ -35,6 +40,7 @@ from scipy.spatial import cKDTree
 
 from common.geometry import rotation_about_line
 from services.registration.dynamic.preprocess import Cloud
+from services.registration.dynamic.turn4dof import TurnSearchConfig, search_turn
 
 reg = o3d.pipelines.registration
 
@@ -63,6 +69,15 @@ class PairConfig:
     accept_fitness: float = 0.55  # verification of the prior path (fitness on the evaluation clouds)
     accept_rmse: float = 0.0018
     fast_point_to_plane: bool = True  # last point-to-plane pass: sim milk loop error 2.0° -> 0.3°, Chamfer -21 %
+    # global stages when the prior path fails verification: first the 4-DoF turn search (yaw about the table
+    # normal + shift: an object on a table only turns and slides), the 6-DoF search only if that fails too
+    turn_stage: bool = True
+    turn_search: TurnSearchConfig = field(default_factory=TurnSearchConfig)
+    max_settle_tilt_deg: float = 5.0  # a 6-DoF polish of the 4-DoF result may tilt it this much (re-seating)
+    # a prior-path result that tilts the object more than this is a tumble (a face matched onto another),
+    # not a turn: it fails the check like a low fitness would
+    max_turn_tilt_deg: float = 10.0
+    global_margin: float = 0.05  # a 6-DoF result must beat a 4-DoF one by this much score to replace it
     # scoring
     eval_voxel: float = 0.002
     fitness_distance: float = 0.003
@@ -99,7 +114,7 @@ class PairResult:
     fitness: float
     rmse: float
     color_fitness: float
-    path: str  # "prior" | "global" | "paper" | "failed"
+    path: str  # "prior" | "turn4dof" | "global" | "paper" | "failed"
     candidate: str  # "full" | "crop" | "region0".. : which clouds gave the winning transform
     seconds: float
     attempts: int = 0
@@ -402,8 +417,18 @@ def _register_fast(job: PairJob, cfg: PairConfig, scorer: _Scorer) -> PairResult
     assert best is not None
     _, T, name, (f, rmse, cf) = best
     path = "prior"
-    if f < cfg.accept_fitness or rmse > cfg.accept_rmse:
-        # verification failed: global stage from scratch, then the same local refinement
+    prior_tilt = tilt_deg(T, job.axis)
+    tried[-1]["tilt_deg"] = round(prior_tilt, 2)
+    if cfg.turn_stage and (not _verified(f, rmse, cfg) or prior_tilt > cfg.max_turn_tilt_deg):
+        if prior_tilt > cfg.max_turn_tilt_deg:
+            best = (-np.inf, T, name, (f, rmse, cf))  # a tumble: any turn found beats it
+        key, T4, sc4 = _turn_stage(job, cfg, scorer, tried)
+        if key > best[0]:
+            best, path = (key, T4, "full", sc4), "turn4dof"
+        _, T, name, (f, rmse, cf) = best
+    if not _verified(f, rmse, cfg):
+        # still inconsistent (a toppled or re-seated object): global 6-DoF stage, then the same local refinement
+        margin = cfg.global_margin if path == "turn4dof" else 0.0
         rng = np.random.default_rng(cfg.seed + 7919 * job.index)
         for overlap in cfg.overlaps:
             Tg, _, method = global_align(job.source, job.target, cfg.global_voxel, overlap,
@@ -412,12 +437,45 @@ def _register_fast(job: PairJob, cfg: PairConfig, scorer: _Scorer) -> PairResult
             fails_total += fails
             sc = scorer(Tl)
             tried.append({"candidate": f"global_{method}_{overlap}", "fitness": sc[0], "color_fitness": sc[2]})
-            if _score_key(sc[0], sc[2]) > best[0]:
+            if _score_key(sc[0], sc[2]) > best[0] + margin:
                 best = (_score_key(sc[0], sc[2]), Tl, "full", sc)
-                path = "global"
+                path, margin = "global", 0.0
         _, T, name, (f, rmse, cf) = best
     return PairResult(job.index, job.source_view, job.target_view, T, f, rmse, cf, path, name, 0.0,
                       attempts=1, color_icp_failures=fails_total, detail={"tried": tried})
+
+
+def tilt_deg(T: np.ndarray, axis: np.ndarray) -> float:
+    """How far ``T`` tips the turn axis (degrees): 0 for a pure turn about the table normal."""
+    a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    return float(np.degrees(np.arccos(np.clip(a @ (np.asarray(T)[:3, :3] @ a), -1.0, 1.0))))
+
+
+def _verified(f: float, rmse: float, cfg: PairConfig) -> bool:
+    """The consistency check of a pair result: enough overlap, small residual."""
+    return f >= cfg.accept_fitness and rmse <= cfg.accept_rmse
+
+
+def _turn_stage(job: PairJob, cfg: PairConfig, scorer: _Scorer, tried: list[dict]
+                ) -> tuple[float, np.ndarray, tuple[float, float, float]]:
+    """4-DoF turn search from the prior, then a 6-DoF local polish kept only if it tilts the result no more
+    than ``max_settle_tilt_deg`` (an object settling differently); (score key, T, scores) of the better."""
+    tr = search_turn(job.source, job.target, job.axis, job.center, prior=job.prior, config=cfg.turn_search)
+    out = [(tr.T, "turn4dof")]
+    Tl, _ = fast_local(job.source, job.target, tr.T, cfg, start_level=1)
+    tilt = tilt_deg(Tl @ np.linalg.inv(tr.T), job.axis)
+    if tilt <= cfg.max_settle_tilt_deg:
+        out.append((Tl, "turn4dof+icp"))
+    best = None
+    for T, name in out:
+        sc = scorer(T)
+        key = _score_key(sc[0], sc[2])
+        tried.append({"candidate": name, "yaw_deg": round(tr.yaw_deg, 2), "fitness": sc[0], "color_fitness": sc[2],
+                      "tilt_deg": round(tilt, 2) if name != "turn4dof" else 0.0})
+        if best is None or key > best[0]:
+            best = (key, T, sc)
+    assert best is not None
+    return best
 
 
 def _register_paper(job: PairJob, cfg: PairConfig, scorer: _Scorer) -> PairResult:

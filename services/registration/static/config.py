@@ -77,10 +77,15 @@ class StaticConfig:
     plane_distance: float = 0.004  # m; RANSAC inlier distance of the table plane
     plane_iterations: int = 500
     plane_voxel: float = 0.005  # m; the plane is searched on a cloud this coarse (speed), then refit
-    min_table_fraction: float = 0.15  # of the cloud's points must lie on the table plane
+    # The table is chosen among table_planes planes by the prior, not by size: a wall behind the object is
+    # often the biggest plane, and a camera looking across the table sees only a grazing strip of it.
+    table_planes: int = 6  # planes searched, largest first (1: the paper's "dominant plane")
+    min_table_fraction: float = 0.03  # of the cloud's points must lie on the table plane
     min_table_points: int = 200
     expected_up: tuple[float, float, float] | None = (0.0, 0.0, 1.0)  # table normal in base; None: unknown
     max_table_tilt_deg: float = 25.0
+    expected_table_height: float | None = 0.0  # m along expected_up (base: table top at 0); None: anywhere
+    table_height_tolerance: float = 0.08  # m; a plane farther from the expected height is not the table
     table_clearance: float = 0.004  # m; points closer than this to the table are table
     max_object_height: float = 0.4  # m; above this, points are not on-table objects
     cluster_voxel: float = 0.004  # m; DBSCAN runs on this coarser copy, labels go back by nearest point
@@ -104,6 +109,14 @@ class StaticConfig:
         if profile == "default":
             return cls(**overrides)
         raise ValueError(f"unknown static profile {profile!r} (expected 'default' or 'paper')")
+
+    def __post_init__(self) -> None:
+        if self.table_planes < 1:
+            raise ValueError(f"table_planes must be at least 1, got {self.table_planes}")
+        if not 0.0 <= self.min_table_fraction <= 1.0:
+            raise ValueError(f"min_table_fraction must be in [0, 1], got {self.min_table_fraction}")
+        if self.table_height_tolerance <= 0:
+            raise ValueError(f"table_height_tolerance must be positive, got {self.table_height_tolerance}")
 
     def with_(self, **changes: Any) -> StaticConfig:
         return replace(self, **changes)

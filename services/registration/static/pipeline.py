@@ -468,6 +468,11 @@ def register_view(frames: list[RGBDFrame], config: StaticConfig | None = None) -
                 min_points=cfg.min_table_points,
                 expected_up=up,
                 max_tilt_deg=cfg.max_table_tilt_deg,
+                seed_point=seed_base,
+                max_seed_height=cfg.max_object_height,
+                expected_height=cfg.expected_table_height,
+                height_tolerance=cfg.table_height_tolerance,
+                max_planes=cfg.table_planes,
             )
         with sw("cluster"):
             T0 = scan_results[0].T_base_camera

@@ -1,0 +1,102 @@
+"""``import_sequence``: frames -> base frame -> isolated views -> turns -> a session folder.
+
+The session is what ``objscan reconstruct`` reads: one view per frame (``view_KK/scan_0``) with the fixed
+camera's pose in the table-based ``base``, and ``session.json`` with the cumulative turns (given or
+estimated) and an ``import`` block saying how they were found. A frame whose object cannot be isolated
+(``no_object``, ``empty_depth``) is left out and named in the report.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from common.errors import ObjscanError
+from common.messages import Intrinsics
+from common.session_folder import write_scan, write_session
+from services.importer.base_frame import BaseFrameConfig, estimate_base_frame
+from services.importer.errors import ImportError_
+from services.importer.sources import read_frames
+from services.importer.turns import DIRECTIONS, pair_searches, plan_turns
+from services.registration.dynamic.turn4dof import TurnSearchConfig
+from services.registration.dynamic.views import view_from_static
+from services.registration.static import StaticConfig, register_view
+
+
+@dataclass(frozen=True)
+class ImportConfig:
+    """What the user knows about the sequence; everything else is estimated."""
+
+    turn_step_deg: float | None = None  # None: estimate each turn
+    direction: str = "unknown"  # "ccw" | "cw" (seen from above) | "unknown": try both
+    every: int = 1  # keep one frame in this many (a 30 fps recording of a slow turntable)
+    depth_scale: float = 0.001  # m per depth unit (folder sources; a recording carries its own)
+    object_name: str = "imported"
+    base: BaseFrameConfig = field(default_factory=BaseFrameConfig)
+    turn_search: TurnSearchConfig = field(default_factory=TurnSearchConfig)
+
+    def __post_init__(self) -> None:
+        if self.direction not in DIRECTIONS:
+            raise ValueError(f"direction must be one of {DIRECTIONS}, got {self.direction!r}")
+        if self.turn_step_deg is not None and not (0 < abs(self.turn_step_deg) < 180):
+            raise ValueError(f"turn_step_deg must be in (0, 180), got {self.turn_step_deg}")
+        if self.every < 1:
+            raise ValueError(f"every must be at least 1, got {self.every}")
+
+
+def import_sequence(source: str | Path, out_dir: str | Path, intrinsics: Intrinsics | None = None,
+                    config: ImportConfig | None = None, static: StaticConfig | None = None,
+                    progress: Any = None) -> dict[str, Any]:
+    """Import ``source`` into the session folder ``out_dir``; returns the import report (also in session.json)."""
+    cfg = config or ImportConfig()
+    st = static or StaticConfig()
+    say = progress or (lambda info: None)
+    t0 = time.perf_counter()
+    frames = read_frames(source, intrinsics, cfg.depth_scale, cfg.every)
+    say({"stage": "read", "frames": len(frames), "seconds": round(time.perf_counter() - t0, 2)})
+    base = estimate_base_frame(frames, cfg.base, st)
+    say({"stage": "base_frame", "camera_height_m": round(base.camera_height_m, 4),
+         "look_down_deg": round(base.look_down_deg, 1)})
+    kept, views, skipped = [], [], []
+    for k, f in enumerate(frames):
+        f.T_base_camera = base.T_base_camera.copy()
+        try:
+            res = register_view([f], st)
+        except ObjscanError as exc:
+            skipped.append({"frame": k, "seq": f.seq, "code": exc.code, "message": exc.message})
+            continue
+        kept.append(f)
+        views.append(view_from_static(res, 0.0, index=len(views)))
+        say({"stage": "isolate", "frame": k, "of": len(frames), "points": len(res.object_cloud)})
+    if len(views) < 3:
+        raise ImportError_("fewer than 3 frames show an object standing on the table", code="too_few_views",
+                           detail={"kept": len(views), "skipped": skipped[:10]})
+    searches = pair_searches(views, cfg.turn_search)
+    plan = plan_turns(searches, cfg.turn_step_deg, cfg.direction)
+    say({"stage": "turns", "source": plan.source, "direction": plan.direction,
+         "median_turn_deg": round(float(np.median(np.abs(plan.pair_yaw_deg))), 2)})
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    for k, f in enumerate(kept):
+        write_scan(out, k, 0, f, extra={"pose_source": "table_plane", "source_frame": int(f.seq)})
+    report = {
+        "source": str(source),
+        "frames": len(frames),
+        "views": len(kept),
+        "skipped": skipped,
+        "base_frame": base.to_json(),
+        "turns": plan.to_json(),
+        "seconds": round(time.perf_counter() - t0, 3),
+    }
+    write_session(out, {
+        "object": cfg.object_name,
+        "profile": "imported",
+        "views": [{"index": k, "commanded_turn_deg": round(c, 4), "turn_source": plan.source}
+                  for k, c in enumerate(plan.cumulative_deg)],
+        "import": report,
+    })
+    return report
