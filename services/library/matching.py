@@ -25,18 +25,29 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 import open3d as o3d
 from scipy.spatial import cKDTree
 
 from common.messages import PointCloud
-from services.library.descriptors import check_xyz, describe, view_distance
+from services.library.descriptors import DescriptorConfig, check_xyz, describe, view_distance
 from services.library.errors import BadModelInput
 
-if TYPE_CHECKING:
-    from services.library.store import ModelLibrary
+
+class ModelSource(Protocol):
+    """What matching reads from a library (``store.ModelLibrary`` is one): the entries, each entry's cloud
+    and stored descriptors. A protocol rather than the class, so the store can offer ``find`` without the two
+    modules importing each other."""
+
+    descriptor_config: DescriptorConfig
+
+    def list(self) -> list: ...
+
+    def load_cloud(self, entry_id: str) -> o3d.geometry.PointCloud: ...
+
+    def descriptors(self, entry_id: str) -> dict[str, np.ndarray]: ...
 
 reg = o3d.pipelines.registration
 
@@ -79,7 +90,7 @@ class _Prepared:
     tree: cKDTree
 
 
-def find(library: ModelLibrary, cloud: np.ndarray | PointCloud | str | Path, top_k: int = 3, *,
+def find(library: ModelSource, cloud: np.ndarray | PointCloud | str | Path, top_k: int = 3, *,
          rgb: np.ndarray | None = None, config: FindConfig | None = None) -> list[Match]:
     """Rank the library's models for a partial view ``cloud``; returns up to ``top_k`` ``Match``es, best first.
 
@@ -109,7 +120,7 @@ def find(library: ModelLibrary, cloud: np.ndarray | PointCloud | str | Path, top
     return out[:int(top_k)]
 
 
-def _descriptor_distance(library: ModelLibrary, xyz: np.ndarray, entry_id: str,
+def _descriptor_distance(library: ModelSource, xyz: np.ndarray, entry_id: str,
                          cache: dict[tuple[int, ...], np.ndarray]) -> float:
     """GOOD distance of the query to a model's synthetic views, at the resolutions that model was stored
     with (a library opened with another ``DescriptorConfig`` still compares like with like)."""

@@ -60,6 +60,7 @@ from common.messages import PointCloud
 from common.session_folder import json_default
 from services.library.descriptors import DescriptorConfig, check_xyz, model_descriptors
 from services.library.errors import BadModelInput, LibraryError, ModelNotFound
+from services.library.matching import find as find_matches
 from services.library.metadata import ModelMetadata, slug
 
 log = logging.getLogger("objscan.library")
@@ -265,9 +266,7 @@ class ModelLibrary:
 
         See ``services.library.matching.find`` for how (GOOD shortlist, then registration fitness).
         """
-        from services.library.matching import find
-
-        return find(self, cloud_xyz, top_k, rgb=rgb, config=config)
+        return find_matches(self, cloud_xyz, top_k, rgb=rgb, config=config)
 
     def descriptors(self, entry_id: str) -> dict[str, np.ndarray]:
         """The stored GOOD descriptors of a model: ``whole`` (D,) and ``views`` (V, D)."""
