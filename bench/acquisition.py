@@ -24,7 +24,7 @@ from common import keys
 from common.client import request_sync
 from common.launcher import ServiceGroup
 from common.messages import Request
-from services.cli.cells import cell_specs
+from services.cell import cell_specs
 
 
 def acquire(out: Path, *, object_name: str, views: int, profile: str, seed: int, log_dir: Path,

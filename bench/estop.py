@@ -40,7 +40,7 @@ from common.client import request_sync
 from common.codec import decode
 from common.launcher import ServiceGroup
 from common.messages import Error, Ok
-from services.cli.cells import cell_specs
+from services.cell import cell_specs
 
 ROBOT = keys.DEFAULT_ROBOT
 TARGET_P99_MS = 50.0

@@ -35,7 +35,7 @@ from common.client import request_sync
 from common.errors import ObjscanError, RequestTimeout
 from common.launcher import ServiceGroup
 from common.messages import RGBDFrame
-from services.cli.cells import cell_specs
+from services.cell import cell_specs
 from services.orchestrator.config import ScanGeometry
 from services.orchestrator.planning import scan_pose_candidates
 

@@ -1,38 +1,14 @@
-"""Which processes make up a cell, and how the CLI joins an existing network or starts its own.
+"""How the CLI joins an existing network (``--connect``, TLS variables) or names a session on a remote cell.
 
-The embedded default is every service as its own OS process with the ``sim`` backends, wired through a
-Zenoh router on loopback. Commands that need services (scan, replay, capture) reuse running ones when
-``objscan status`` would find them, and start this set otherwise.
+Which processes make up a cell is ``services/cell.py``. Commands that need services (scan, replay, capture)
+reuse running ones when ``objscan status`` would find them, and start that set otherwise.
 """
 
 from __future__ import annotations
 
 import os
 
-from common.launcher import ProcessSpec
 from common.zenoh_config import ZenohSettings
-
-SERVICE_MODULES = {
-    "sim": "services.sim",
-    "camera": "services.camera",
-    "arm": "services.arm",
-    "registration": "services.registration",
-    "grasp": "services.grasp",
-    "orchestrator": "services.orchestrator",
-}
-
-
-def cell_specs(services: list[str] | None = None, *, backend: str = "sim",
-               extra_args: dict[str, list[str]] | None = None) -> list[ProcessSpec]:
-    """Process specs for the named services (default: all), with the given hardware backend."""
-    names = services or list(SERVICE_MODULES)
-    specs = []
-    for name in names:
-        args = list((extra_args or {}).get(name, []))
-        if name == "camera" or (name == "arm" and backend != "realsense"):
-            args = ["--backend", backend, *args]
-        specs.append(ProcessSpec(SERVICE_MODULES[name], args, service=name))
-    return specs
 
 
 def network_settings(connect: str | None) -> ZenohSettings:

@@ -33,7 +33,8 @@ from common.errors import ObjscanError
 from common.launcher import ServiceGroup
 from common.messages import Ok, Request
 from common.zenoh_config import DEFAULT_ROUTER_PORT, free_tcp_port
-from services.cli.cells import SERVICE_MODULES, add_network_args, cell_specs, remote_session, session_name
+from services.cell import SERVICE_MODULES, cell_specs
+from services.cli.cells import add_network_args, remote_session, session_name
 from services.cli.outcome import USAGE, one_line, print_json, report_error
 from services.live import add_live_args, live_requested, open_live_view
 

@@ -14,7 +14,8 @@ from pathlib import Path
 from common.errors import ObjscanError
 from common.launcher import ServiceGroup
 from common.zenoh_config import DEFAULT_ROUTER_PORT
-from services.cli.cells import SERVICE_MODULES, add_network_args, cell_specs, network_settings
+from services.cell import SERVICE_MODULES, cell_specs
+from services.cli.cells import add_network_args, network_settings
 
 
 def register(sub) -> None:  # noqa: ANN001

@@ -18,7 +18,7 @@ from common import keys
 from common.client import request_sync
 from common.launcher import ProcessSpec, ServiceGroup
 from common.messages import Ok, Request
-from services.cli.cells import cell_specs
+from services.cell import cell_specs
 
 ROBOT = keys.DEFAULT_ROBOT
 VIEWS = 4

@@ -23,7 +23,7 @@ from common.codec import decode
 from common.errors import ObjscanError
 from common.launcher import ProcessSpec, ServiceGroup
 from common.messages import Health, Ok, Request
-from services.cli.cells import cell_specs
+from services.cell import cell_specs
 
 ROBOT = keys.DEFAULT_ROBOT
 WORKER_MODULE = "tests.faults.registration_worker"  # services.registration + a bug workaround (see there)

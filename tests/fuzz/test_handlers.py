@@ -29,7 +29,7 @@ from common.client import live_services, request_sync
 from common.codec import Message, decode
 from common.errors import WireError
 from common.messages import Error, Health, Ok, Request
-from services.cli.cells import cell_specs
+from services.cell import cell_specs
 from tests.fuzz.strategies import MESSAGE_TYPES, any_valid_message, hostile_wire, pack, valid_message
 
 pytestmark = pytest.mark.filterwarnings("ignore::hypothesis.errors.NonInteractiveExampleWarning")

@@ -16,7 +16,7 @@ from common.errors import ObjscanError
 from common.launcher import ServiceGroup
 from common.messages import Ok, Request
 from common.session_folder import read_scan, read_session
-from services.cli.cells import cell_specs
+from services.cell import cell_specs
 from services.recording.reader import read_recording
 from services.recording.recorder import recording_parts
 from tests.recording.test_session_replay import _assert_same_model, _wait_closed, _wait_status

@@ -19,7 +19,7 @@ from common.client import request_sync
 from common.errors import ObjscanError
 from common.launcher import ServiceGroup
 from common.messages import Ok, Request
-from services.cli.cells import cell_specs
+from services.cell import cell_specs
 from services.recording.reader import read_recording
 
 ROBOT = keys.DEFAULT_ROBOT

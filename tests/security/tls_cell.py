@@ -13,7 +13,7 @@ import zenoh
 
 from common.launcher import ProcessSpec, ServiceGroup
 from common.zenoh_config import TlsSettings, ZenohSettings, free_tcp_port
-from services.cli.cells import cell_specs
+from services.cell import cell_specs
 from services.cli.cmd_certs import generate_lab_certs
 
 
