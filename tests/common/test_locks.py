@@ -8,7 +8,8 @@ import tomllib
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
-DEV_TOOLS = {"pytest", "pytest-timeout", "hypothesis", "ruff", "atheris", "trimesh", "websockets"}
+# websockets (the Foxglove test's client) is in the test extra but not a tool: mujoco-studio needs it at run time
+DEV_TOOLS = {"pytest", "pytest-timeout", "hypothesis", "ruff", "atheris", "trimesh"}
 
 
 def _pins(lock: str) -> dict[str, str]:
