@@ -1,0 +1,71 @@
+"""The incremental model's contract at the algorithm level: a pair job built while later views are still to
+come is the very job ``build_model`` runs at the end, so its result can be reused, and the model is the same
+as computing every pair at the end (docs/dynamic-registration.md, "Incremental model")."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from services.registration.dynamic.model import DynamicConfig, build_model, early_pair_job
+from services.registration.dynamic.pair import job_fingerprint, register_pair
+from services.registration.dynamic.preprocess import PreprocessConfig
+from services.registration.dynamic.views import DynamicRegistrationError
+from tests.conftest import shared_data
+
+CONFIG = DynamicConfig(configuration="no_region", preprocess=PreprocessConfig(palette_views=2))
+
+
+@pytest.fixture(scope="module")
+def views():
+    shared_data("hope", "milk")
+    from services.registration.dynamic.synthetic import synthetic_views
+
+    return synthetic_views("milk", profile="hand-turned", seed=3).views
+
+
+def _as_captured(views, config=CONFIG):
+    """Pair results as the acquisition makes them: edge k-1 as soon as view k exists, never seeing later views."""
+    reuse = {}
+    for k in range(1, len(views)):
+        seen = {i: v for i, v in enumerate(views[:k + 1])}
+        job = early_pair_job(seen, k, config)
+        assert job is not None and (job.source_view, job.target_view, job.index) == (k, k - 1, k - 1)
+        reuse[job_fingerprint(job)] = register_pair(job)
+    return reuse
+
+
+def test_incremental_pairs_give_the_same_model_as_computing_them_at_the_end(views):
+    reuse = _as_captured(views)
+    incremental = build_model(views, CONFIG, reuse=reuse)
+    at_end = build_model(views, CONFIG)
+    # 11 neighbour pairs reused; only the loop closure (its prior chains all of them) is computed at the end
+    assert incremental.timings["pairs"] == {"reused": 11, "computed": 1}
+    assert at_end.timings["pairs"] == {"reused": 0, "computed": 12}
+    for a, b in zip(incremental.edges, at_end.edges, strict=True):
+        assert np.allclose(a.T, b.T, atol=1e-9) and abs(a.fitness - b.fitness) < 1e-9
+    for a, b in zip(incremental.T_model_view, at_end.T_model_view, strict=True):
+        assert np.allclose(a, b, atol=1e-9)
+    assert len(incremental) == len(at_end) and np.allclose(incremental.xyz, at_end.xyz, atol=1e-7)
+
+
+def test_a_changed_view_or_config_is_recomputed_not_reused(views):
+    reuse = _as_captured(views)
+    moved = list(views)
+    v5 = moved[5]
+    moved[5] = replace(v5, xyz=np.asarray(v5.xyz) + np.float32(0.0005))  # view 5 re-scanned: 0.5 mm elsewhere
+    model = build_model(moved, CONFIG, reuse=reuse)
+    assert model.timings["pairs"] == {"reused": 9, "computed": 3}  # edges 4 (5->4) and 5 (6->5), and the loop
+    other = replace(CONFIG, pair=replace(CONFIG.pair, fitness_distance=0.004))
+    assert build_model(views, other, reuse=reuse).timings["pairs"]["reused"] == 0
+
+
+def test_no_early_job_when_it_could_still_change(views):
+    seen = dict(enumerate(views[:4]))
+    assert early_pair_job(seen, 3, DynamicConfig()) is None  # palette from all views: view 11 would change it
+    assert early_pair_job(seen, 3, replace(CONFIG, configuration="region")) is None  # regions: left to the end
+    assert early_pair_job({0: views[0], 2: views[2], 3: views[3]}, 3, CONFIG) is None  # palette view 1 missing
+    with pytest.raises(DynamicRegistrationError):
+        PreprocessConfig(palette_views=-1)
