@@ -57,6 +57,8 @@ class AcquisitionConfig:
     max_rescans: int = 2  # re-scans per view before the session ends with a reason
     force_first_slip: bool = False  # sim: the first grasp slips (recovery test)
     evaluate: bool = True  # compare with ground truth when the cell knows it (sim)
+    # pair registrations during the acquisition (services/orchestrator/incremental.py); off: all at the end
+    incremental: bool = True
     workspace_center: tuple[float, float] = (0.60, 0.0)  # where the locate pose looks (and the twin puts the object)
     scan: ScanGeometry = field(default_factory=ScanGeometry)
     turn: TurnMotion = field(default_factory=TurnMotion)
