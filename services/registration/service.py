@@ -66,7 +66,11 @@ class RegistrationService(Service):
     async def pair_any(self, msg: Message | None, ctx: QueryContext) -> Message:
         from services.registration.dynamic_face import register_pair_distributed
 
-        return await register_pair_distributed(self, msg)
+        self.coordinating += 1
+        try:
+            return await register_pair_distributed(self, msg)
+        finally:
+            self.coordinating -= 1
 
     async def dynamic(self, msg: Message | None, ctx: QueryContext) -> Message:
         from services.registration.dynamic_face import build_model_distributed
