@@ -55,6 +55,8 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--robot-config", help="dynamixel arm: robot configuration YAML (default: PAPRAS)")
     p.add_argument("--port", type=int, default=DEFAULT_ROUTER_PORT, help="router port of the cell")
     p.add_argument("--force-first-slip", action="store_true", help="sim: make the first grasp slip")
+    p.add_argument("--no-incremental", action="store_true",
+                   help="register every view pair at the end, not while the arm turns (the old, slower path)")
     p.add_argument("--no-record", action="store_true", help="do not record the session to session.mcap")
     p.add_argument("--library", help="model library folder the model is added to (default: the orchestrator's)")
     p.add_argument("--robot", default=keys.DEFAULT_ROBOT)
@@ -128,7 +130,8 @@ def run(args) -> int:  # noqa: ANN001
         else:
             params = {"out": str(session_dir), "config": {
                 "object": args.object, "views": args.views, "profile": args.profile, "seed": args.seed,
-                "width": args.width, "height": args.height, "force_first_slip": args.force_first_slip}}
+                "width": args.width, "height": args.height, "force_first_slip": args.force_first_slip,
+                                  "incremental": not args.no_incremental}}
             params["record"] = not args.no_record
             if args.library:
                 params["library"] = str(Path(args.library).resolve())
