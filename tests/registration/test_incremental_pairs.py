@@ -26,6 +26,14 @@ def views():
     return synthetic_views("milk", profile="hand-turned", seed=3, voxel=0.002).views
 
 
+@pytest.fixture(scope="module")
+def views_1mm():
+    shared_data("hope", "milk")
+    from services.registration.dynamic.synthetic import synthetic_views
+
+    return synthetic_views("milk", profile="hand-turned", seed=3).views
+
+
 def _quick_result(job):
     """A stand-in pair result (identity, as pre-rotated): fast tests check which jobs run, not their quality."""
     return PairResult(job.index, job.source_view, job.target_view, np.eye(4), 0.9, 0.001, 0.5, "prior", "full", 0.0)
@@ -65,10 +73,14 @@ def test_jobs_built_during_the_acquisition_are_the_jobs_of_the_end(views):
 
 
 @pytest.mark.slow  # 2 x 12 real pair registrations: ~25 s idle, over a minute on the shared box
-def test_incremental_pairs_give_the_same_model_as_computing_them_at_the_end(views):
+def test_incremental_pairs_give_the_same_model_as_computing_them_at_the_end(views_1mm):
+    views = views_1mm
     reuse = _as_captured(views)
     incremental = build_model(views, CONFIG, reuse=reuse)
     at_end = build_model(views, CONFIG)
+    # bit for bit only where the pair path is deterministic: the prior path is; the global fallback's 4PCS
+    # stops at a time budget (max_time_s), so two end-of-run computations of such a pair differ as well
+    assert all(e.path == "prior" for e in at_end.edges), [e.path for e in at_end.edges]
     # 11 neighbour pairs reused; only the loop closure (its prior chains all of them) is computed at the end
     assert incremental.timings["pairs"] == {"reused": 11, "computed": 1}
     assert at_end.timings["pairs"] == {"reused": 0, "computed": 12}
