@@ -4,6 +4,7 @@ as computing every pair at the end (docs/dynamic-registration.md, "Incremental m
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 
 import numpy as np
@@ -109,3 +110,23 @@ def test_no_early_job_when_it_could_still_change(views):
     assert early_pair_job({0: views[0], 2: views[2], 3: views[3]}, 3, CONFIG) is None  # palette view 1 missing
     with pytest.raises(DynamicRegistrationError):
         PreprocessConfig(palette_views=-1)
+
+
+def test_reused_results_travel_exactly_and_malformed_ones_are_refused():
+    from common.errors import InvalidRequest
+    from services.registration.dynamic_face import dynamic_config
+    from services.registration.pair_wire import pair_record, reuse_records
+
+    rng = np.random.default_rng(0)
+    T = np.eye(4)
+    T[:3, 3] = rng.normal(size=3)
+    r = PairResult(4, 5, 4, T, 0.8123456789, 0.0012345, 0.51, "prior", "full", 1.5, detail={"k": np.float32(2)})
+    (back,) = reuse_records(json.loads(json.dumps([pair_record("abc", r)]))).values()
+    assert np.array_equal(back.T, r.T) and back.fitness == r.fitness and back.rmse == r.rmse
+    for bad in ("x", [{"fingerprint": "a"}], [pair_record("a", r) | {"T": [[1, 2], [3, 4]]}],
+                [pair_record("a", r) | {"T": np.full((4, 4), np.nan).tolist()}]):
+        with pytest.raises(InvalidRequest):
+            reuse_records(bad)
+    assert dynamic_config({"preprocess": {"palette_views": 2}}).preprocess.palette_views == 2
+    with pytest.raises(InvalidRequest):
+        dynamic_config({"preprocess": {"no_such_knob": 1}})
