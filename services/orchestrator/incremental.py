@@ -67,19 +67,23 @@ class IncrementalModel:
 
     # ------------------------------------------------------------------------------------------ scheduling
     def view_ready(self, k: int, turns_deg: list[float]) -> None:
-        """View ``k`` is registered (again): start the pair jobs of every registered edge up to it, in the
-        background. Returns at once; edges already stored for the same job are skipped by the task."""
+        """View ``k`` was just registered (perhaps again, after a re-scan): start its pair job, and those of
+        any earlier edge not started yet (a resume), in the background. Returns at once."""
+        if self.enabled and (k, self._generation.get(k, 0)) in self._tasks:  # view k anew: a new job
+            self._generation[k] += 1
+        self.catch_up(k, turns_deg)
+
+    def catch_up(self, k: int, turns_deg: list[float]) -> None:
+        """Start the pair job of every edge up to view ``k`` whose views are registered and that was not
+        started by this orchestrator yet; a job already stored in the session folder is not sent again."""
         if not self.enabled:
             return
         for source in range(1, k + 1):
             if source >= len(turns_deg) or not (self.store.has_view(source) and self.store.has_view(source - 1)):
                 continue
-            gen = self._generation.get(source, 0)
-            if source == k and (source, gen) in self._tasks:  # view k registered anew (a re-scan): a new job
-                gen = self._generation[source] = gen + 1
-            if (source, gen) in self._tasks:
-                continue
-            self._tasks[(source, gen)] = asyncio.ensure_future(self._edge(source, list(turns_deg)))
+            key = (source, self._generation.setdefault(source, 0))
+            if key not in self._tasks:
+                self._tasks[key] = asyncio.ensure_future(self._edge(source, list(turns_deg)))
 
     async def finished(self) -> list[dict]:
         """Wait for the jobs in flight (a failed one is only logged) and return every stored result record."""

@@ -609,7 +609,7 @@ class Acquisition:
         n = self.config.views
         views = [self.store.load_view(k) for k in range(n)]
         turns = [float(t) for t in self.j["turns_deg"][:n]]
-        self.incremental.view_ready(n - 1, turns)  # after a resume: any edge not stored yet
+        self.incremental.catch_up(n - 1, turns)  # after a resume: any edge not started yet
         reuse = await self.incremental.finished()
         result = await self.cell.build_model(views, turns, {**self.incremental.config, "reuse_pairs": reuse})
         path = self.store.save_model(result.cloud)

@@ -40,8 +40,9 @@ class PairCell:
 
     robot = "robot0"
 
-    def __init__(self, gate: asyncio.Event | None = None):
+    def __init__(self, gate: asyncio.Event | None = None, delay: float = 0.0):
         self.gate = gate
+        self.delay = delay
         self.jobs: list[tuple[int, int]] = []
         self.started = asyncio.Event()
         self.dynamic_config: dict | None = None
@@ -55,6 +56,7 @@ class PairCell:
         self.started.set()
         if self.gate is not None:
             await self.gate.wait()
+        await asyncio.sleep(self.delay)  # a worker takes its time: jobs overlap
         T = np.eye(4)
         T[0, 3] = 0.001 * job.source_view  # recognisable per edge
         return pair_result_message(PairResult(job.index, job.source_view, job.target_view, T, 0.8, 0.001, 0.5,
@@ -131,15 +133,16 @@ def test_the_final_request_carries_the_finished_pairs_and_their_palette(tmp_path
         for k in range(VIEWS):  # the last view's scans exist: the model's lateness is measured from them
             (tmp_path / f"view_{k:02d}" / "scan_2").mkdir(parents=True, exist_ok=True)
             (tmp_path / f"view_{k:02d}" / "scan_2" / "meta.json").write_text("{}")
-        cell = PairCell()
+        cell = PairCell(delay=1.0)
         acq = Acquisition(cell, store, AcquisitionConfig(views=VIEWS, evaluate=False))  # type: ignore[arg-type]
         acq.j.update(state=State.MODEL.value, view=VIEWS - 1, turns_deg=view_results[1])
         acq._park = _nothing  # type: ignore[method-assign]
+        acq.incremental.view_ready(VIEWS - 1, view_results[1])  # as `register` of the last view did
         assert await asyncio.wait_for(acq.model(), 30) == State.DONE
         return cell, acq
 
     cell, acq = asyncio.run(go())
-    assert sorted(cell.jobs) == [(1, 0), (2, 1), (3, 2)]  # every edge whose views exist was sent
+    assert sorted(cell.jobs) == [(1, 0), (2, 1), (3, 2)]  # every edge whose views exist was sent, each once
     cfg = cell.dynamic_config
     assert cfg["preprocess"]["palette_views"] == 2 and len(cfg["reuse_pairs"]) == VIEWS - 1
     assert acq.j["model_ready_s_after_last_view"] is not None
