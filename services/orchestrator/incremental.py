@@ -87,6 +87,8 @@ class IncrementalModel:
 
     async def finished(self) -> list[dict]:
         """Wait for the jobs in flight (a failed one is only logged) and return every stored result record."""
+        if not self.enabled:
+            return []
         if self._tasks:
             await asyncio.gather(*self._tasks.values(), return_exceptions=True)
         return await asyncio.to_thread(self.records)
