@@ -9,6 +9,11 @@ scan``, or ``geometric``). ``$OBJSCAN_BENCH_OBJECTS`` (comma-separated HOPE name
 several objects one after the other: the figures then sit under ``objects`` (one entry each). With
 ``$OBJSCAN_BENCH_SESSIONS`` (comma-separated finished session folders, e.g. of ``objscan scan``) nothing
 is scanned: those sessions are scored from their ``report.json`` and ``journal.json``.
+
+One object (the default): scanned twice in the same run, with the incremental model (pair registrations
+while the arm turns, the default) and without it (every pair at the end, the old path) as the baseline. The
+headline figure is ``model_ready_s_after_last_view``: from the last view's last scan saved to the model saved
+(target <= 5 s).
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ from services.cell import cell_specs
 
 
 def acquire(out: Path, *, object_name: str, views: int, profile: str, seed: int, log_dir: Path,
-            physics: str = "mujoco") -> dict[str, Any]:
+            physics: str = "mujoco", incremental: bool = True) -> dict[str, Any]:
     with ServiceGroup(log_dir=log_dir) as group:
         # the orchestrator writes sessions only under its --sessions root: the session's parent folder
         group.launch(cell_specs(extra_args={"orchestrator": ["--sessions", str(Path(out).resolve().parent)]}),
@@ -36,7 +41,7 @@ def acquire(out: Path, *, object_name: str, views: int, profile: str, seed: int,
         t0 = time.perf_counter()
         request_sync(group.session, keys.orchestrator(keys.DEFAULT_ROBOT, "run"), Request(params={
             "out": str(out), "config": {"object": object_name, "views": views, "profile": profile, "seed": seed,
-                                        "physics": physics}}),
+                                        "physics": physics, "incremental": incremental}}),
             timeout=30)
         while True:
             s = request_sync(group.session, keys.orchestrator(keys.DEFAULT_ROBOT, "status"), timeout=10).info
@@ -77,18 +82,21 @@ def score_session(out: Path, *, seconds: float | None = None, status: str | None
     report = json.loads((out / "report.json").read_text()) if (out / "report.json").is_file() else {}
     journal = json.loads((out / "journal.json").read_text())
     acc = report.get("accuracy", {})
+    model = report.get("model_figures", {})
     cfg = journal.get("config", {})
     views = int(cfg.get("views", 12))
     if seconds is None:
         seconds = float(sum((journal.get("timings_s") or {}).values())) or 0.0
     return {"object": cfg.get("object"), "views": views, "profile": cfg.get("profile"),
             "physics": cfg.get("physics", "geometric"), "status": status or journal.get("status"),
-            "topple_restarts": journal.get("topple_restarts", 0),
+            "topple_restarts": journal.get("topple_restarts", 0), "incremental": cfg.get("incremental", True),
+            "model_ready_s_after_last_view": report.get("model_ready_s_after_last_view"),
+            "dynamic_s": model.get("timings", {}).get("total_s"), "pairs": model.get("timings", {}).get("pairs"),
             "seconds_total": round(seconds, 1), "seconds_per_view": round(seconds / views, 1),
             "grasp_attempts": journal["counters"]["grasp_attempts"], "rescans": journal["counters"]["rescans"],
             **{k: acc.get(k) for k in ("chamfer_mm", "accuracy_mm", "completeness_mm", "fscore_2mm", "fscore_5mm")},
             "unaligned_chamfer_mm": acc.get("unaligned", {}).get("chamfer_mm"),
-            "configuration": report.get("model_figures", {}).get("configuration"),
+            "configuration": model.get("configuration"),
             "true_turns": true_turns(out),
             "timings_s": journal.get("timings_s"), "session": str(out), "error": error or journal.get("error")}
 
@@ -100,6 +108,16 @@ def run(quick: bool = False) -> dict[str, Any]:
     physics = os.environ.get("OBJSCAN_BENCH_PHYSICS", "mujoco")
     names = [n.strip() for n in os.environ.get("OBJSCAN_BENCH_OBJECTS", "milk").split(",") if n.strip()]
     root = Path(tempfile.mkdtemp(prefix="objscan-bench-acq-"))
-    results = [acquire(root / f"session_{i}", object_name=name, views=4 if quick else 12, profile="robot-turned",
-                       seed=1, log_dir=root / f"logs_{i}", physics=physics) for i, name in enumerate(names)]
-    return results[0] if len(results) == 1 else {"objects": results}
+    views = 4 if quick else 12
+    if len(names) > 1:
+        return {"objects": [acquire(root / f"session_{i}", object_name=name, views=views, profile="robot-turned",
+                                    seed=1, log_dir=root / f"logs_{i}", physics=physics)
+                            for i, name in enumerate(names)]}
+    runs = {}
+    for variant, incremental in (("incremental", True), ("end_of_run", False)):
+        runs[variant] = acquire(root / variant, object_name=names[0], views=views, profile="robot-turned", seed=1,
+                                log_dir=root / f"logs-{variant}", physics=physics, incremental=incremental)
+    inc, base = runs["incremental"], runs["end_of_run"]
+    return {**inc, "model_ready_s_after_last_view_end_of_run": base["model_ready_s_after_last_view"],
+            "target_s": 5.0, "seconds_total_end_of_run": base["seconds_total"],
+            "chamfer_mm_end_of_run": base["chamfer_mm"], "runs": runs}

@@ -70,6 +70,8 @@ def register(sub) -> None:  # noqa: ANN001
                    help=f"router port of the cell to join or start (default: {DEFAULT_ROUTER_PORT}, or a private "
                         "free port when another objscan scan owns that cell)")
     p.add_argument("--force-first-slip", action="store_true", help="sim: make the first grasp slip")
+    p.add_argument("--no-incremental", action="store_true",
+                   help="register every view pair at the end, not while the arm turns (the old, slower path)")
     p.add_argument("--no-record", action="store_true", help="do not record the session to session.mcap")
     p.add_argument("--library", help="model library folder the model is added to (default: the orchestrator's)")
     p.add_argument("--robot", default=keys.DEFAULT_ROBOT)
@@ -216,7 +218,7 @@ def _acquire(session, args, target: str, *, local: bool, t0: float) -> int:  # n
         params = {"out": target, "config": {
             "object": args.object, "views": args.views, "profile": args.profile, "seed": args.seed,
             "physics": args.physics, "width": args.width, "height": args.height,
-            "force_first_slip": args.force_first_slip}}
+            "force_first_slip": args.force_first_slip, "incremental": not args.no_incremental}}
         params["record"] = not args.no_record
         if args.library:
             params["library"] = str(Path(args.library).resolve())

@@ -156,6 +156,16 @@ class Cell:
                                     timeout=COMPUTE_TIMEOUT_S * 2)
         return _expect(reply, ModelResult)
 
+    async def register_pair(self, job: Message) -> Message:
+        """One pair job (a ``PairJobMessage``) on the registration workers; the reply is its ``PairResultMessage``.
+
+        The message classes live with the registration code (imported by the caller, not here: they pull in
+        open3d)."""
+        reply = await self._request(keys.REGISTRATION_PAIR, job, timeout=COMPUTE_TIMEOUT_S)
+        if type(reply).__name__ != "PairResultMessage":
+            raise RemoteError(f"expected PairResultMessage, got {type(reply).__name__}", code="bad_reply")
+        return reply
+
     # ---------------------------------------------------------------------------- digital twin only
     async def sim(self, op: str, **params: Any) -> dict[str, Any]:
         # a reset builds the world: with mujoco physics a new non-convex mesh is decomposed first (coacd,

@@ -145,6 +145,8 @@ class AcquisitionConfig:
     topple_height_rel: float = 0.25
     max_topple_restarts: int = 1
     evaluate: bool = True  # compare with ground truth when the cell knows it (sim)
+    # pair registrations during the acquisition (services/orchestrator/incremental.py); off: all at the end
+    incremental: bool = True
     workspace_center: tuple[float, float] = (0.60, 0.0)  # where the locate pose looks (and the twin puts the object)
     scan: ScanGeometry = field(default_factory=ScanGeometry)
     turn: TurnMotion = field(default_factory=TurnMotion)

@@ -39,9 +39,10 @@ from common.api import GraspPlanReply, MoveResult, ViewResult
 from common.errors import ObjscanError, RemoteError
 from common.log import event
 from common.messages import Grasp
-from common.session_folder import view_dir
+from common.session_folder import scan_dir, view_dir
 from services.orchestrator.cell import Cell
 from services.orchestrator.config import AcquisitionConfig
+from services.orchestrator.incremental import IncrementalModel
 from services.orchestrator.limits import name_limit
 from services.orchestrator.planning import (
     TurnPoses,
@@ -123,6 +124,8 @@ class Acquisition:
                 self.j["state"] = State.SCAN.value
         self._plan: GraspPlanReply | None = None
         self._step = ""
+        self.incremental = IncrementalModel(store, self.config.dynamic_config, cell,
+                                            enabled=self.config.incremental, decide=self.decide)
 
     # -------------------------------------------------------------------------------- bookkeeping
     @property
@@ -208,6 +211,7 @@ class Acquisition:
                              f"{type(exc).__name__}: {exc}")
         except Exception as exc:  # a bug must end the session visibly, not leave it 'running' forever
             await self._fail("internal", f"{type(exc).__name__}: {exc}")
+        self.incremental.close()
         self._persist_final()
         return self.status()
 
@@ -365,6 +369,7 @@ class Acquisition:
             self._remember_object(k, result)
             self.decide("view registered", points=len(result.cloud),
                         seconds=result.figures.get("timings_s", {}).get("total"))
+        self.incremental.view_ready(k, self.j["turns_deg"])  # pair k-1 -> k in the background, never awaited here
         if k >= self.config.views - 1:
             return State.MODEL
         return State.PLAN_GRASP
@@ -783,11 +788,17 @@ class Acquisition:
         n = self.config.views
         views = [self.store.load_view(k) for k in range(n)]
         turns = [float(t) for t in self.j["turns_deg"][:n]]
-        result = await self.cell.build_model(views, turns, self.config.dynamic_config)
+        self.incremental.catch_up(n - 1, turns)  # after a resume: any edge not started yet
+        reuse = await self.incremental.finished()
+        result = await self.cell.build_model(views, turns, {**self.incremental.config, "reuse_pairs": reuse})
         path = self.store.save_model(result.cloud)
+        last_scan = scan_dir(self.store.path, n - 1, SCANS_PER_VIEW - 1) / "meta.json"
+        if last_scan.is_file():  # the model's lateness: from the last view's last scan saved to the model saved
+            self.j["model_ready_s_after_last_view"] = round(path.stat().st_mtime - last_scan.stat().st_mtime, 2)
         self.j["model_path"] = str(path)
         report: dict[str, Any] = {"model": str(path), "points": len(result.cloud), "model_figures": result.figures,
-                                  "turns_commanded_deg": turns}
+                                  "turns_commanded_deg": turns, "incremental": self.config.incremental,
+                                  "model_ready_s_after_last_view": self.j.get("model_ready_s_after_last_view")}
         if self.config.evaluate and self.j.get("simulated"):
             report["accuracy"] = await self._evaluate(result.cloud.xyz)
             self.j["accuracy"] = {k: report["accuracy"][k] for k in ("chamfer_mm", "accuracy_mm", "completeness_mm",

@@ -9,6 +9,7 @@ left the coordinator finishes the remaining jobs itself. Results come back in jo
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import queue
 import threading
@@ -19,7 +20,7 @@ import numpy as np
 import zenoh
 
 from common import keys
-from common.api import DynamicRequest, ModelResult
+from common.api import DynamicRequest, ModelResult, ViewResult
 from common.codec import Message, decode
 from common.errors import InvalidRequest, RemoteError, WireError
 from common.log import event
@@ -29,8 +30,11 @@ from services.registration.dynamic.pair import PairConfig, PairJob, PairResult, 
 from services.registration.dynamic.views import DynamicView
 from services.registration.pair_wire import (
     PairResultMessage,
+    pair_job_from_message,
     pair_job_message,
     pair_result_from_message,
+    pair_result_message,
+    reuse_records,
 )
 
 if TYPE_CHECKING:
@@ -156,20 +160,23 @@ def distributed_map(session: zenoh.Session, stats: dict):  # noqa: ANN201 - MapP
     return map_pairs
 
 
+def dynamic_view(v: ViewResult, turn_deg: float, index: int) -> DynamicView:
+    """The dynamic stage's view of a registered view as it travels (and as the orchestrator stores it)."""
+    c = v.cloud
+    return DynamicView(xyz=np.asarray(c.xyz, np.float32),
+                       rgb=np.asarray(c.rgb if c.rgb is not None else np.zeros_like(c.xyz, np.uint8)),
+                       normals=None if c.normals is None else np.asarray(c.normals, np.float32),
+                       table=v.table, center=np.asarray(v.center, float), commanded_turn_deg=float(turn_deg),
+                       index=index)
+
+
 def _views(msg: DynamicRequest) -> list[DynamicView]:
-    out = []
-    for k, (v, turn) in enumerate(zip(msg.views, msg.turns_deg, strict=True)):
-        c = v.cloud
-        out.append(DynamicView(xyz=np.asarray(c.xyz, np.float32),
-                               rgb=np.asarray(c.rgb if c.rgb is not None else np.zeros_like(c.xyz, np.uint8)),
-                               normals=None if c.normals is None else np.asarray(c.normals, np.float32),
-                               table=v.table, center=np.asarray(v.center, float), commanded_turn_deg=float(turn),
-                               index=k))
-    return out
+    return [dynamic_view(v, turn, k) for k, (v, turn) in enumerate(zip(msg.views, msg.turns_deg, strict=True))]
 
 
 def dynamic_config(d: dict) -> DynamicConfig:
-    """A DynamicConfig from a request's map: ``configuration``, ``paper`` (bool), ``model_voxel``, ``pair``."""
+    """A DynamicConfig from a request's map: ``configuration``, ``paper`` (bool), ``model_voxel``, ``pair``,
+    ``preprocess`` (e.g. ``{"palette_views": 2}``, as the incremental model sets it)."""
     if d.get("paper"):
         cfg = DynamicConfig.paper(d.get("configuration", "no_region"))
     else:
@@ -182,7 +189,26 @@ def dynamic_config(d: dict) -> DynamicConfig:
         from dataclasses import replace
 
         cfg = replace(cfg, pair=replace(cfg.pair, **d["pair"]))
+    if isinstance(d.get("preprocess"), dict):
+        from dataclasses import replace
+
+        try:
+            cfg = replace(cfg, preprocess=replace(cfg.preprocess, **d["preprocess"]))
+        except TypeError as exc:
+            raise InvalidRequest(f"bad preprocess config: {exc}", detail={"preprocess": d["preprocess"]}) from exc
     return cfg
+
+
+async def register_pair_distributed(service: RegistrationService, msg: Message | None) -> PairResultMessage:
+    """One pair job (``registration/pair``), run by a live worker; a worker that dies has it re-run by another.
+
+    The incremental model sends pair jobs here during the acquisition; the answer is the job's result.
+    """
+    job = pair_job_from_message(msg)
+    stats: dict = {}
+    run = distributed_map(service.session, stats)
+    (result,) = await asyncio.to_thread(run, [job])
+    return pair_result_message(result)
 
 
 async def build_model_distributed(service: RegistrationService, msg: Message | None) -> ModelResult:
@@ -190,8 +216,10 @@ async def build_model_distributed(service: RegistrationService, msg: Message | N
         raise InvalidRequest("expected a DynamicRequest", detail={"got": type(msg).__name__})
     views = _views(msg)
     config = dynamic_config(msg.config)
+    reuse = reuse_records(msg.config.get("reuse_pairs", []))
     stats: dict = {}
-    result = await service.run_cpu(build_model, views, config, distributed_map(service.session, stats))
+    result = await service.run_cpu(build_model, views, config, distributed_map(service.session, stats),
+                                   reuse=reuse)
     cloud = PointCloud(xyz=np.asarray(result.xyz, np.float32), rgb=np.asarray(result.rgb, np.uint8),
                        normals=np.asarray(result.normals, np.float32))
     figures = result.to_json()
@@ -199,4 +227,4 @@ async def build_model_distributed(service: RegistrationService, msg: Message | N
     return ModelResult(cloud=cloud, figures=figures)
 
 
-__all__ = ["PairConfig", "build_model_distributed", "distributed_map"]
+__all__ = ["PairConfig", "build_model_distributed", "distributed_map", "register_pair_distributed"]

@@ -145,3 +145,37 @@ def pair_result_from_message(m: PairResultMessage) -> PairResult:
                       fitness=m.fitness, rmse=m.rmse, color_fitness=m.color_fitness, path=m.path,
                       candidate=m.candidate, seconds=m.seconds, attempts=m.attempts,
                       color_icp_failures=m.color_icp_failures, detail=m.detail)
+
+
+def pair_record(fingerprint: str, r: PairResult) -> dict:
+    """JSON form of a finished pair job with the fingerprint of the job it answers (session folder, reuse)."""
+    return {"fingerprint": fingerprint, "index": r.index, "source_view": r.source_view,
+            "target_view": r.target_view, "T": np.asarray(r.T, float).tolist(), "fitness": float(r.fitness),
+            "rmse": float(r.rmse), "color_fitness": float(r.color_fitness), "path": r.path,
+            "candidate": r.candidate, "seconds": float(r.seconds), "attempts": int(r.attempts),
+            "color_icp_failures": int(r.color_icp_failures), "detail": _plain(r.detail)}
+
+
+def reuse_records(records: object) -> dict[str, PairResult]:
+    """fingerprint -> PairResult from ``pair_record`` maps (a ``DynamicRequest``'s ``reuse_pairs``).
+
+    Anything malformed is a typed error: a reused result goes into the model unchecked, so it must be whole.
+    """
+    if not isinstance(records, list):
+        raise InvalidRequest("reuse_pairs must be a list of pair records")
+    out: dict[str, PairResult] = {}
+    for i, d in enumerate(records):
+        try:
+            T = np.asarray(d["T"], dtype=np.float64)
+            if T.shape != (4, 4) or not np.isfinite(T).all() or not isinstance(d["fingerprint"], str):
+                raise ValueError("T must be a finite 4x4 and fingerprint a string")
+            r = PairResult(index=int(d["index"]), source_view=int(d["source_view"]),
+                           target_view=int(d["target_view"]), T=T, fitness=float(d["fitness"]),
+                           rmse=float(d["rmse"]), color_fitness=float(d["color_fitness"]), path=str(d["path"]),
+                           candidate=str(d["candidate"]), seconds=float(d["seconds"]),
+                           attempts=int(d.get("attempts", 0)), color_icp_failures=int(d.get("color_icp_failures", 0)),
+                           detail=dict(d.get("detail", {})))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InvalidRequest(f"reuse_pairs[{i}] is not a pair record: {exc}") from exc
+        out[d["fingerprint"]] = r
+    return out

@@ -3,6 +3,8 @@
 - ``objscan/registration/static``: the scans of one view → the isolated object (``ViewResult``).
 - ``objscan/registration/dynamic``: registered views → the model; its pair jobs are spread over every
   live registration worker (found by liveliness), a job whose worker dies is retried on another.
+- ``objscan/registration/pair``: one pair job (the incremental model's, during an acquisition), run by a
+  live worker; retried on another when that worker dies.
 - ``objscan/registration/worker/{instance}/pair``: one pair job, answered by this worker.
 
 Every instance is a worker; any one of them can coordinate a dynamic request. The algorithms live in
@@ -44,6 +46,7 @@ class RegistrationService(Service):
         self.queryable(keys.REGISTRATION_STATIC, self.static)
         self.queryable(keys.registration_worker_pair(self.instance), self.pair)
         self.queryable(keys.REGISTRATION_DYNAMIC, self.dynamic)
+        self.queryable(keys.REGISTRATION_PAIR, self.pair_any)
 
     async def static(self, msg: Message | None, ctx: QueryContext) -> ViewResult:
         if not isinstance(msg, StaticRequest):
@@ -59,6 +62,15 @@ class RegistrationService(Service):
         result = await self.run_cpu(register_pair, job)
         self.jobs_done["pair"] += 1
         return pair_result_message(result)
+
+    async def pair_any(self, msg: Message | None, ctx: QueryContext) -> Message:
+        from services.registration.dynamic_face import register_pair_distributed
+
+        self.coordinating += 1
+        try:
+            return await register_pair_distributed(self, msg)
+        finally:
+            self.coordinating -= 1
 
     async def dynamic(self, msg: Message | None, ctx: QueryContext) -> Message:
         from services.registration.dynamic_face import build_model_distributed

@@ -35,15 +35,19 @@ from services.registration.dynamic.configurations import (
     choose,
     consistency_score,
 )
-from services.registration.dynamic.pair import PairConfig, PairJob, PairResult, register_pair
+from services.registration.dynamic.pair import PairConfig, PairJob, PairResult, job_fingerprint, register_pair
 from services.registration.dynamic.pose_graph import optimise_pose_graph
 from services.registration.dynamic.preprocess import (
     Cloud,
     Prepared,
+    PreparedView,
     PreprocessConfig,
     attach_regions,
     neighbour_edges,
+    prepare_view,
     preprocess,
+    scan_palette,
+    stacking_frame,
 )
 from services.registration.dynamic.views import DynamicRegistrationError, DynamicView
 
@@ -148,17 +152,70 @@ def process_pool_map(workers: int) -> MapPairs:
     return run
 
 
+def pair_job(index: int, vs: PreparedView, vt: PreparedView, center: np.ndarray, axis: np.ndarray,
+             pair: PairConfig, region_pairs: list[tuple[int, int]] | None = None) -> PairJob:
+    """Edge ``index``: register prepared view ``vs`` onto ``vt`` (the one place a pair job is built)."""
+    return PairJob(
+        index=index, source_view=vs.index, target_view=vt.index, source=vs.reduced, target=vt.reduced,
+        center=center, axis=axis, config=replace(pair, seed=pair.seed + 1000 * index),
+        source_regions=vs.regions if pair.regions else [], target_regions=vt.regions if pair.regions else [],
+        region_pairs=(region_pairs or []) if pair.regions else [])
+
+
 def make_pair_jobs(prep: Prepared, pair: PairConfig) -> list[PairJob]:
     """The 12 neighbour pair jobs (view i+1 onto view i, and the 0 onto n-1 loop closure)."""
-    jobs = []
-    for k, (s, t) in enumerate(neighbour_edges(len(prep.views))):
-        vs, vt = prep.views[s], prep.views[t]
-        jobs.append(PairJob(
-            index=k, source_view=s, target_view=t, source=vs.reduced, target=vt.reduced,
-            center=prep.center, axis=prep.axis, config=replace(pair, seed=pair.seed + 1000 * k),
-            source_regions=vs.regions if pair.regions else [], target_regions=vt.regions if pair.regions else [],
-            region_pairs=prep.region_pairs.get((s, t), []) if pair.regions else []))
-    return jobs
+    return [pair_job(k, prep.views[s], prep.views[t], prep.center, prep.axis, pair, prep.region_pairs.get((s, t)))
+            for k, (s, t) in enumerate(neighbour_edges(len(prep.views)))]
+
+
+def configuration_names(config: DynamicConfig) -> list[str]:
+    """The configurations ``build_model`` runs, in order (the automatic choice: cheapest first)."""
+    if config.configuration == "auto":
+        return list(CONFIGURATIONS)
+    if config.configuration in CONFIGURATIONS:
+        return [config.configuration]
+    raise DynamicRegistrationError(f"unknown configuration {config.configuration!r}", code="bad_value",
+                                   detail={"configurations": ["auto", *CONFIGURATIONS]})
+
+
+def early_pair_job(views: dict[int, DynamicView], source: int, config: DynamicConfig) -> PairJob | None:
+    """The job ``build_model`` will run first for edge ``source`` -> ``source - 1``, from the views so far.
+
+    For the incremental model: while later views are still being captured, this job is already final when
+    the palette comes from the first views only (``preprocess.palette_views``) and the first configuration
+    needs no regions (regions are paired by GOOD across neighbours, fine, but not worth it for the
+    fallback configurations). ``views`` must hold view 0, the palette's views, ``source`` and
+    ``source - 1``. None when the job cannot be known yet (the caller then leaves it to the end).
+    """
+    pre = config.preprocess
+    if source < 1 or pre.palette_views < 1 or source < pre.palette_views - 1:
+        return None
+    name = configuration_names(config)[0]
+    regions, crop = CONFIGURATIONS[name]
+    if regions:
+        return None
+    needed = {0, source - 1, source, *range(pre.palette_views)}
+    if not needed <= set(views):
+        return None
+    center, axis = stacking_frame(views[0])
+    palette = scan_palette([views[k] for k in range(pre.palette_views)], pre)
+    for k in (source - 1, source):
+        views[k].validate()
+    vs, vt = (prepare_view(views[k], center, axis, palette, pre) for k in (source, source - 1))
+    return pair_job(source - 1, vs, vt, center, axis, replace(config.pair, regions=regions, crop=crop))
+
+
+def reusing(map_pairs: MapPairs, reuse: dict[str, PairResult], stats: dict) -> MapPairs:
+    """A ``map_pairs`` that answers a job from ``reuse`` (fingerprint -> result) when it holds that exact job."""
+    def run(jobs: list[PairJob]) -> list[PairResult]:
+        known = {j.index: reuse.get(job_fingerprint(j)) if reuse else None for j in jobs}
+        todo = [j for j in jobs if known[j.index] is None]
+        fresh = {r.index: r for r in (map_pairs(todo) if todo else [])}
+        stats["reused"] = stats.get("reused", 0) + len(jobs) - len(todo)
+        stats["computed"] = stats.get("computed", 0) + len(todo)
+        return [known[j.index] or fresh[j.index] for j in jobs]
+
+    return run
 
 
 def chain_to_first(results: list[PairResult]) -> np.ndarray:
@@ -221,21 +278,21 @@ def fuse(views: list[DynamicView], T_model_view: list[np.ndarray], voxel: float)
 
 
 def build_model(views: list[DynamicView], config: DynamicConfig | None = None,
-                map_pairs: MapPairs | None = None, progress: Progress | None = None) -> ModelResult:
-    """Register the views into one colored model; see the module doc."""
+                map_pairs: MapPairs | None = None, progress: Progress | None = None,
+                reuse: dict[str, PairResult] | None = None) -> ModelResult:
+    """Register the views into one colored model; see the module doc.
+
+    ``reuse`` (job fingerprint -> result): pair results computed earlier, e.g. during the acquisition;
+    a job whose fingerprint is there is not run again (``timings["pairs"]`` counts reused and computed).
+    """
     cfg = config or DynamicConfig()
-    run = map_pairs or sequential_map
+    pair_stats: dict = {"reused": 0, "computed": 0}
+    run = reusing(map_pairs or sequential_map, reuse or {}, pair_stats)
     say = progress or (lambda stage, info: None)
     t0 = time.perf_counter()
     prep = preprocess(views, cfg.preprocess)
     say("preprocessed", {"views": len(views), "seconds": prep.seconds})
-    if cfg.configuration == "auto":
-        names = list(CONFIGURATIONS)
-    elif cfg.configuration in CONFIGURATIONS:
-        names = [cfg.configuration]
-    else:
-        raise DynamicRegistrationError(f"unknown configuration {cfg.configuration!r}", code="bad_value",
-                                       detail={"configurations": ["auto", *CONFIGURATIONS]})
+    names = configuration_names(cfg)
     staged = cfg.configuration == "auto" and cfg.auto_strategy == "staged"
     outcomes: list[ConfigurationOutcome] = []
     for name in names:
@@ -253,7 +310,8 @@ def build_model(views: list[DynamicView], config: DynamicConfig | None = None,
     model = fuse(views, T_model_view, cfg.model_voxel)
     timings = {"preprocess_s": prep.seconds,
                **{f"{o.name}_s": o.seconds for o in outcomes},
-               "fuse_s": time.perf_counter() - t_fuse, "total_s": time.perf_counter() - t0}
+               "fuse_s": time.perf_counter() - t_fuse, "total_s": time.perf_counter() - t0,
+               "pairs": pair_stats}
     say("done", {"configuration": chosen.name, "seconds": timings["total_s"]})
     return ModelResult(model.xyz, model.rgb, model.normals, T_model_view, chosen.results, chosen.loop,
                        chosen.consistency, chosen.name, reason, chosen.combined.method,

@@ -30,6 +30,7 @@ tie that geometry leaves on symmetric objects (cans); both are reported.
 
 from __future__ import annotations
 
+import hashlib
 import threading
 import time
 from dataclasses import dataclass, field
@@ -101,6 +102,27 @@ class PairJob:
     target_regions: list[Cloud] = field(default_factory=list)
     region_pairs: list[tuple[int, int]] = field(default_factory=list)
     prior: np.ndarray = field(default_factory=lambda: np.eye(4))
+
+
+def job_fingerprint(job: PairJob) -> str:
+    """A digest of everything ``register_pair`` reads: equal digests, equal jobs.
+
+    Lets a result computed earlier (the incremental model, during the acquisition) stand in for the
+    same job at the end, and only then: a re-scanned view or another configuration changes the digest.
+    """
+    h = hashlib.sha256()
+    h.update(repr((job.index, job.source_view, job.target_view, job.config, job.region_pairs)).encode())
+    for c in (job.source, job.target, *job.source_regions, b"|", *job.target_regions):
+        if isinstance(c, bytes):
+            h.update(c)
+            continue
+        for a in (c.xyz, c.rgb, c.normals):
+            a = np.ascontiguousarray(a)
+            h.update(str((a.dtype.str, a.shape)).encode())
+            h.update(a.tobytes())
+    for a in (job.center, job.axis, job.prior):
+        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    return h.hexdigest()
 
 
 @dataclass

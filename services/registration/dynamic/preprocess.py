@@ -39,6 +39,15 @@ class PreprocessConfig:
     good_bins: tuple[int, ...] = (10, 30, 50)
     region_pairs: int = 3
     seed: int = 0
+    # 0: the palette is fitted on every view (one color meaning for the whole scan). n > 0: on the first n
+    # views only, so pair jobs can be built while later views are still being captured (the incremental
+    # model, docs/dynamic-registration.md): a job's inputs then never change once its two views exist.
+    palette_views: int = 0
+
+    def __post_init__(self) -> None:
+        if self.palette_views < 0:
+            raise DynamicRegistrationError("palette_views must be >= 0 (0 = all views)", code="bad_value",
+                                           detail={"palette_views": self.palette_views})
 
 
 @dataclass
@@ -145,6 +154,27 @@ def _view_cloud(view: DynamicView, config: PreprocessConfig) -> Cloud:
     return Cloud(xyz, rgb, nrm.astype(np.float32))
 
 
+def scan_palette(views: list[DynamicView], config: PreprocessConfig) -> np.ndarray:
+    """The scan's color palette: fitted on every view, or on the first ``palette_views`` of them."""
+    used = views[:config.palette_views] if config.palette_views > 0 else views
+    return fit_palette([np.asarray(v.rgb) for v in used], config.color_clusters, config.kmeans_samples, config.seed)
+
+
+def stacking_frame(view0: DynamicView) -> tuple[np.ndarray, np.ndarray]:
+    """(reference centre, unit turn axis) every view is stacked on: view 0's centre and table normal."""
+    axis = np.asarray(view0.table.normal, dtype=float)
+    return np.asarray(view0.center, dtype=float), axis / np.linalg.norm(axis)
+
+
+def prepare_view(view: DynamicView, ref_center: np.ndarray, axis: np.ndarray, palette: np.ndarray,
+                 config: PreprocessConfig) -> PreparedView:
+    """One view pre-rotated, stacked and color-quantised; depends on no other view than through its args."""
+    T = prerotation(view, ref_center, axis)
+    cloud = _view_cloud(view, config).transformed(T)
+    reduced = Cloud(cloud.xyz, quantize(cloud.rgb, palette), cloud.normals)
+    return PreparedView(view.index, T, cloud, reduced)
+
+
 def neighbour_edges(n_views: int) -> list[tuple[int, int]]:
     """(source, target) of the n pair registrations: view i+1 onto view i, and view 0 onto view n-1."""
     return [((i + 1) % n_views, i) for i in range(n_views - 1)] + [(0, n_views - 1)]
@@ -156,16 +186,9 @@ def preprocess(views: list[DynamicView], config: PreprocessConfig | None = None,
     t0 = time.perf_counter()
     cfg = config or PreprocessConfig()
     validate_views(views)
-    axis = np.asarray(views[0].table.normal, dtype=float)
-    axis = axis / np.linalg.norm(axis)
-    ref_center = np.asarray(views[0].center, dtype=float)
-    palette = fit_palette([np.asarray(v.rgb) for v in views], cfg.color_clusters, cfg.kmeans_samples, cfg.seed)
-    prepared: list[PreparedView] = []
-    for v in views:
-        T = prerotation(v, ref_center, axis)
-        cloud = _view_cloud(v, cfg).transformed(T)
-        reduced = Cloud(cloud.xyz, quantize(cloud.rgb, palette), cloud.normals)
-        prepared.append(PreparedView(v.index, T, cloud, reduced))
+    ref_center, axis = stacking_frame(views[0])
+    palette = scan_palette(views, cfg)
+    prepared = [prepare_view(v, ref_center, axis, palette, cfg) for v in views]
     prep = Prepared(prepared, ref_center, axis, {}, palette)
     if regions:
         attach_regions(prep, cfg)

@@ -1,0 +1,79 @@
+"""``objscan/registration/pair`` over Zenoh: a real registration process runs one pair job (the incremental
+model's) and answers exactly what the job gives when run here; a killed worker's job is re-run by another."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from common import keys
+from common.client import live_services, request_sync
+from common.errors import ObjscanError
+from common.launcher import ProcessSpec
+from tests.conftest import shared_data
+
+
+def _job():
+    shared_data("hope", "milk")
+    from services.registration.dynamic.model import DynamicConfig, early_pair_job
+    from services.registration.dynamic.preprocess import PreprocessConfig
+    from services.registration.dynamic.synthetic import synthetic_views
+
+    views = synthetic_views("milk", views=12, profile="hand-turned", seed=3, voxel=0.003).views
+    cfg = DynamicConfig(configuration="no_region", preprocess=PreprocessConfig(palette_views=2))
+    return early_pair_job(dict(enumerate(views[:3])), 2, cfg)
+
+
+def test_a_pair_job_sent_to_registration_pair_comes_back_as_computed_here(service_group):
+    from services.registration.dynamic.pair import register_pair
+    from services.registration.pair_wire import PairResultMessage, pair_job_message, pair_result_from_message
+
+    job = _job()
+    service_group.launch([ProcessSpec("services.registration", [], service="registration")], timeout=180)
+    reply = request_sync(service_group.session, keys.REGISTRATION_PAIR, pair_job_message(job), timeout=300)
+    assert isinstance(reply, PairResultMessage), reply
+    there, here = pair_result_from_message(reply), register_pair(job)
+    assert (there.source_view, there.target_view, there.index) == (2, 1, 1)
+    assert np.allclose(there.T, here.T, atol=1e-9) and abs(there.fitness - here.fitness) < 1e-9
+
+
+def _health(group, instance: str):  # noqa: ANN001, ANN202
+    try:
+        return request_sync(group.session, keys.health("registration", instance), timeout=2)
+    except ObjscanError:
+        return None
+
+
+@pytest.mark.slow
+def test_a_pair_job_whose_worker_is_killed_is_finished_by_another(service_group):
+    from services.registration.pair_wire import PairResultMessage, pair_job_message
+
+    msg = pair_job_message(_job())
+    service_group.launch([ProcessSpec("services.registration", ["--instance", i], service="registration", name=i)
+                          for i in ("w1", "w2")], timeout=180)
+    deadline = time.monotonic() + 30
+    while len([i for s, i in live_services(service_group.session) if s == "registration"]) < 2:
+        assert time.monotonic() < deadline
+        time.sleep(0.2)
+    for _attempt in range(4):  # the job may land on the coordinating instance itself: then ask again
+        result: dict[str, object] = {}
+        t = threading.Thread(target=lambda out=result: out.update(
+            reply=request_sync(service_group.session, keys.REGISTRATION_PAIR, msg, timeout=600)))
+        t.start()
+        victim = None
+        while victim is None and t.is_alive():  # the worker running the job, not the one coordinating
+            for inst in ("w1", "w2"):
+                h = _health(service_group, inst)
+                if h is not None and h.info.get("coordinating", 0) == 0 and h.busy > 0:
+                    victim = inst
+            time.sleep(0.05)
+        if victim is not None:
+            service_group.kill(victim)
+        t.join(600)
+        assert isinstance(result.get("reply"), PairResultMessage), result
+        if victim is not None:
+            return
+    pytest.fail("the pair job never ran on the non-coordinating worker")
