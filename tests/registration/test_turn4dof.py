@@ -40,7 +40,9 @@ def test_turn_search_recovers_the_twin_turn(twin_pair):
     prior = prerotation(v1, v0.center, axis)  # centres stacked, no turn assumed
     res = search_turn(_cloud(v1), _cloud(v0), axis, v0.center, prior=prior)
     dt, dr = transform_error(res.T, T_true)
-    assert dr < 1.5 and dt < 0.004, (dt, dr, res.yaw_deg)
+    # the truth is the objects' true poses; each view also carries its static stage's error (a few mm under
+    # hand-turned errors, scans aimed at the estimated centre), so the budget is 5 mm, not the search's own
+    assert dr < 1.5 and dt < 0.005, (dt, dr, res.yaw_deg)
     assert abs(abs(res.yaw_deg) - 45.0) < 6.0  # the achieved turn differs from 45 by the hand-turn error
 
 
