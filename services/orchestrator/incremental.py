@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from common.log import event
-from services.orchestrator.store import SessionStore
+from services.session_store import SessionStore
 
 log = logging.getLogger("objscan.orchestrator")
 

@@ -52,8 +52,8 @@ from services.orchestrator.planning import (
     scan_pose_candidates,
     turn_sequences,
 )
-from services.orchestrator.store import SessionStore
 from services.orchestrator.topple import topple_reason
+from services.session_store import SessionStore
 
 log = logging.getLogger("objscan.orchestrator")
 

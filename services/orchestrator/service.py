@@ -22,8 +22,8 @@ from common.runtime import COMMAND_BUDGET, QueryContext, Service, run_service, s
 from services.orchestrator.cell import Cell
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.machine import Acquisition
-from services.orchestrator.store import SessionStore
-from services.recording.hook import recorded_acquisition
+from services.orchestrator.recording_hook import recorded_acquisition
+from services.session_store import SessionStore
 
 
 class OrchestratorService(Service):

@@ -113,13 +113,13 @@ def replay_registration(source: str | Path, out_dir: str | Path, *, static_profi
     Returns (and writes as ``out_dir/replay.json``) the timings, the model path and, when the recording
     holds a model, the comparison with it (``compare_models``).
     """
-    from services.orchestrator.store import SessionStore
     from services.registration.dynamic.model import build_model
-    from services.registration.dynamic_face import _views
     from services.registration.dynamic_face import dynamic_config as make_dynamic_config
+    from services.registration.dynamic_face import views_from_request
     from services.registration.service import view_result_message
     from services.registration.static.config import StaticConfig
     from services.registration.static.pipeline import register_view
+    from services.session_store import SessionStore
 
     say = progress or (lambda _m: None)
     inputs = registration_inputs(source)
@@ -150,7 +150,7 @@ def replay_registration(source: str | Path, out_dir: str | Path, *, static_profi
         t = time.perf_counter()
         views = [store.load_view(k) for k in order]
         request = DynamicRequest(views=views, turns_deg=turns, config=dyn)
-        model = build_model(_views(request), make_dynamic_config(dyn))
+        model = build_model(views_from_request(request), make_dynamic_config(dyn))
         cloud = PointCloud(xyz=np.asarray(model.xyz, np.float32), rgb=np.asarray(model.rgb, np.uint8),
                            normals=np.asarray(model.normals, np.float32))
         report["model"] = str(store.save_model(cloud))

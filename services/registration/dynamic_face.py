@@ -14,7 +14,8 @@ import logging
 import queue
 import threading
 import time
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import Any, Protocol
 
 import numpy as np
 import zenoh
@@ -37,8 +38,14 @@ from services.registration.pair_wire import (
     reuse_records,
 )
 
-if TYPE_CHECKING:
-    from services.registration.service import RegistrationService
+
+class ServiceContext(Protocol):
+    """What the distributed paths use of the registration service: its Zenoh session (to find live workers)
+    and its executor. A protocol, so this module and ``service.py`` (which calls it) do not import each other."""
+
+    session: zenoh.Session
+
+    async def run_cpu(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any: ...
 
 log = logging.getLogger("objscan.registration")
 PAIR_TIMEOUT_S = 600.0
@@ -170,7 +177,7 @@ def dynamic_view(v: ViewResult, turn_deg: float, index: int) -> DynamicView:
                        index=index)
 
 
-def _views(msg: DynamicRequest) -> list[DynamicView]:
+def views_from_request(msg: DynamicRequest) -> list[DynamicView]:
     return [dynamic_view(v, turn, k) for k, (v, turn) in enumerate(zip(msg.views, msg.turns_deg, strict=True))]
 
 
@@ -199,7 +206,7 @@ def dynamic_config(d: dict) -> DynamicConfig:
     return cfg
 
 
-async def register_pair_distributed(service: RegistrationService, msg: Message | None) -> PairResultMessage:
+async def register_pair_distributed(service: ServiceContext, msg: Message | None) -> PairResultMessage:
     """One pair job (``registration/pair``), run by a live worker; a worker that dies has it re-run by another.
 
     The incremental model sends pair jobs here during the acquisition; the answer is the job's result.
@@ -211,10 +218,10 @@ async def register_pair_distributed(service: RegistrationService, msg: Message |
     return pair_result_message(result)
 
 
-async def build_model_distributed(service: RegistrationService, msg: Message | None) -> ModelResult:
+async def build_model_distributed(service: ServiceContext, msg: Message | None) -> ModelResult:
     if not isinstance(msg, DynamicRequest):
         raise InvalidRequest("expected a DynamicRequest", detail={"got": type(msg).__name__})
-    views = _views(msg)
+    views = views_from_request(msg)
     config = dynamic_config(msg.config)
     reuse = reuse_records(msg.config.get("reuse_pairs", []))
     stats: dict = {}

@@ -21,6 +21,7 @@ from common.codec import Message
 from common.errors import InvalidRequest
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
 from services.registration.dynamic.pair import register_pair
+from services.registration.dynamic_face import build_model_distributed, register_pair_distributed
 
 # registers PairJobMessage/PairResultMessage with the codec: a pair job is decoded before its handler runs
 from services.registration.pair_wire import pair_job_from_message, pair_result_message
@@ -64,8 +65,6 @@ class RegistrationService(Service):
         return pair_result_message(result)
 
     async def pair_any(self, msg: Message | None, ctx: QueryContext) -> Message:
-        from services.registration.dynamic_face import register_pair_distributed
-
         self.coordinating += 1
         try:
             return await register_pair_distributed(self, msg)
@@ -73,8 +72,6 @@ class RegistrationService(Service):
             self.coordinating -= 1
 
     async def dynamic(self, msg: Message | None, ctx: QueryContext) -> Message:
-        from services.registration.dynamic_face import build_model_distributed
-
         self.coordinating += 1
         try:
             result = await build_model_distributed(self, msg)

@@ -2,7 +2,7 @@
 
 Readers are lenient on purpose: a report of a failed run is most useful exactly when files are missing,
 so each part that is absent is ``None`` / empty and the page says so. Only a folder that is not a session
-at all is an error. Layouts read: the orchestrator's (``services/orchestrator/store.py``) and, for views,
+at all is an error. Layouts read: the orchestrator's (``services/session_store.py``) and, for views,
 ``objscan reconstruct``'s ``views/view_KK.ply`` when the output went into the session folder.
 """
 

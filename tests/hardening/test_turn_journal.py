@@ -19,7 +19,7 @@ from common.errors import RemoteError
 from services.orchestrator import machine
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.machine import Acquisition, State
-from services.orchestrator.store import SessionStore
+from services.session_store import SessionStore
 
 
 class ScriptedArmCell:

@@ -1,6 +1,6 @@
 """A fake-but-valid finished acquisition folder, built without any service process.
 
-What the orchestrator would write (``services/orchestrator/store.py``), made from the same building blocks:
+What the orchestrator would write (``services/session_store.py``), made from the same building blocks:
 the twin's scans (``simulated_views`` + ``write_session``), static registration of every view
 (``view_KK/view.json`` + ``object.ply``), the grasp planner on each view but the last
 (``view_KK/grasps_auto.json``), dynamic registration into ``model.ply``, evaluation against the twin's

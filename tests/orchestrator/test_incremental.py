@@ -14,7 +14,7 @@ from common.messages import PointCloud
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.incremental import PAIRS_DIR, IncrementalModel
 from services.orchestrator.machine import Acquisition, State
-from services.orchestrator.store import SessionStore
+from services.session_store import SessionStore
 from tests.conftest import shared_data
 
 VIEWS = 4

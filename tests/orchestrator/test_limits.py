@@ -9,7 +9,7 @@ import pytest
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.limits import name_limit
 from services.orchestrator.machine import Acquisition, AcquisitionFailed
-from services.orchestrator.store import SessionStore
+from services.session_store import SessionStore
 
 
 @pytest.mark.parametrize(("rejections", "dry", "held", "limit"), [

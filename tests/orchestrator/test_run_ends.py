@@ -13,7 +13,7 @@ import pytest
 from common.errors import RemoteError
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.machine import Acquisition
-from services.orchestrator.store import SessionStore
+from services.session_store import SessionStore
 
 
 class RefusingCell:

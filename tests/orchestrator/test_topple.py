@@ -12,8 +12,8 @@ from common.api import ViewResult
 from common.messages import Intrinsics, Plane, PointCloud, RGBDFrame
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.machine import Acquisition, AcquisitionFailed, State
-from services.orchestrator.store import SessionStore
 from services.orchestrator.topple import topple_reason
+from services.session_store import SessionStore
 
 
 class RegisterOnlyCell:

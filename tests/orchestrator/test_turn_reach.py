@@ -23,7 +23,7 @@ from services.grasp.service import GraspService
 from services.orchestrator.config import AcquisitionConfig, TurnMotion
 from services.orchestrator.machine import Acquisition, State
 from services.orchestrator.planning import TurnPoses, turn_sequences
-from services.orchestrator.store import SessionStore
+from services.session_store import SessionStore
 from tests.grasp.shapes import box, table_plane
 from tests.orchestrator.arm_cell import ArmOnlyCell
 

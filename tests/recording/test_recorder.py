@@ -245,7 +245,7 @@ def test_close_writes_everything_queued_before_it(tmp_path):
 
 
 def test_recorded_acquisition_wraps_the_cell_and_cleans_up_when_it_cannot_start(tmp_path):
-    from services.recording.hook import recorded_acquisition
+    from services.orchestrator.recording_hook import recorded_acquisition
 
     class FakeAcquisition:
         def __init__(self, cell):  # noqa: ANN001
