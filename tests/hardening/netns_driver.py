@@ -24,7 +24,7 @@ def main(victim: str, views: int, go_file: str) -> None:
     from pathlib import Path
 
     from services.registration.dynamic.model import build_model
-    from services.registration.dynamic_face import _views, distributed_map
+    from services.registration.dynamic_face import distributed_map, views_from_request
     from tests.registration.test_distributed_workers import _requests
 
     session = open_session(ZenohSettings.from_env())
@@ -33,7 +33,7 @@ def main(victim: str, views: int, go_file: str) -> None:
         if time.monotonic() > deadline:
             raise SystemExit(f"cell not live: {live_services(session)}")
         time.sleep(0.5)
-    dyn_views = _views(_requests(views))
+    dyn_views = views_from_request(_requests(views))
     stats: dict = {}
     result: dict = {}
 
