@@ -44,6 +44,7 @@ class ServiceContext(Protocol):
     and its executor. A protocol, so this module and ``service.py`` (which calls it) do not import each other."""
 
     session: zenoh.Session
+    instance: str
 
     async def run_cpu(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any: ...
 
@@ -110,8 +111,11 @@ def _run_on_worker(session: zenoh.Session, workers: LiveWorkers, instance: str, 
     raise RemoteError(getattr(msg, "message", "pair job failed"), code=code)
 
 
-def distributed_map(session: zenoh.Session, stats: dict):  # noqa: ANN201 - MapPairs
-    """A ``map_pairs`` for ``build_model`` that spreads jobs over the live workers."""
+def distributed_map(session: zenoh.Session, stats: dict, own_instance: str | None = None):  # noqa: ANN201 - MapPairs
+    """A ``map_pairs`` for ``build_model`` that spreads jobs over the live workers.
+
+    ``own_instance`` (the coordinating instance) is offered jobs last: it is also answering the request, so a
+    lone job goes to another worker when there is one."""
 
     def map_pairs(jobs: list[PairJob]) -> list[PairResult]:
         workers = LiveWorkers(session)
@@ -147,7 +151,7 @@ def distributed_map(session: zenoh.Session, stats: dict):  # noqa: ANN201 - MapP
                         stats["by_worker"][instance] += 1
 
             while len(results) < len(jobs) and not errors:
-                live = sorted(workers.snapshot())
+                live = sorted(workers.snapshot(), key=lambda w: (w == own_instance, w))
                 if not live:  # nobody left: do the rest here
                     while not pending.empty():
                         job = pending.get_nowait()
@@ -213,7 +217,7 @@ async def register_pair_distributed(service: ServiceContext, msg: Message | None
     """
     job = pair_job_from_message(msg)
     stats: dict = {}
-    run = distributed_map(service.session, stats)
+    run = distributed_map(service.session, stats, service.instance)
     (result,) = await asyncio.to_thread(run, [job])
     return pair_result_message(result)
 
@@ -225,8 +229,8 @@ async def build_model_distributed(service: ServiceContext, msg: Message | None) 
     config = dynamic_config(msg.config)
     reuse = reuse_records(msg.config.get("reuse_pairs", []))
     stats: dict = {}
-    result = await service.run_cpu(build_model, views, config, distributed_map(service.session, stats),
-                                   reuse=reuse)
+    map_pairs = distributed_map(service.session, stats, service.instance)
+    result = await service.run_cpu(build_model, views, config, map_pairs, reuse=reuse)
     cloud = PointCloud(xyz=np.asarray(result.xyz, np.float32), rgb=np.asarray(result.rgb, np.uint8),
                        normals=np.asarray(result.normals, np.float32))
     figures = result.to_json()

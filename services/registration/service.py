@@ -44,6 +44,7 @@ class RegistrationService(Service):
     async def setup(self) -> None:
         self.jobs_done = {"static": 0, "pair": 0, "dynamic": 0}
         self.coordinating = 0
+        self.pairs_running = 0
         self.queryable(keys.REGISTRATION_STATIC, self.static)
         self.queryable(keys.registration_worker_pair(self.instance), self.pair)
         self.queryable(keys.REGISTRATION_DYNAMIC, self.dynamic)
@@ -58,9 +59,12 @@ class RegistrationService(Service):
         return view_result_message(msg.view, result)
 
     async def pair(self, msg: Message | None, ctx: QueryContext) -> Message:
-
         job = pair_job_from_message(msg)
-        result = await self.run_cpu(register_pair, job)
+        self.pairs_running += 1  # in health: which worker is computing a pair right now
+        try:
+            result = await self.run_cpu(register_pair, job)
+        finally:
+            self.pairs_running -= 1
         self.jobs_done["pair"] += 1
         return pair_result_message(result)
 
@@ -81,7 +85,7 @@ class RegistrationService(Service):
         return result
 
     def health_info(self) -> dict[str, object]:
-        return {**self.jobs_done, "coordinating": self.coordinating}
+        return {**self.jobs_done, "coordinating": self.coordinating, "pairs_running": self.pairs_running}
 
 
 def main() -> None:

@@ -59,7 +59,7 @@ def test_a_killed_worker_has_its_pair_job_finished_by_another(service_group):
     while victim is None and time.monotonic() < deadline:  # kill the worker that is not coordinating, mid-job
         for inst in ("w1", "w2"):
             h = _health(service_group, inst)
-            if h is not None and h.info.get("coordinating", 0) == 0 and h.busy > 0:
+            if h is not None and h.info.get("coordinating", 0) == 0 and h.info.get("pairs_running", 0) > 0:
                 victim = inst
         time.sleep(0.05)
     assert victim is not None, "no worker ever took a pair job"

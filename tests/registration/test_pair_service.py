@@ -67,7 +67,7 @@ def test_a_pair_job_whose_worker_is_killed_is_finished_by_another(service_group)
         while victim is None and t.is_alive():  # the worker running the job, not the one coordinating
             for inst in ("w1", "w2"):
                 h = _health(service_group, inst)
-                if h is not None and h.info.get("coordinating", 0) == 0 and h.busy > 0:
+                if h is not None and h.info.get("coordinating", 0) == 0 and h.info.get("pairs_running", 0) > 0:
                     victim = inst
             time.sleep(0.05)
         if victim is not None:
