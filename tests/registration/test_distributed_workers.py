@@ -10,10 +10,9 @@ import pytest
 
 from common import keys
 from common.api import DynamicRequest, ModelResult, ViewResult
-from common.client import live_services, request_sync
-from common.errors import ObjscanError
-from common.launcher import ProcessSpec
-from common.messages import Health, PointCloud
+from common.client import request_sync
+from common.messages import PointCloud
+from tests.registration.workers import launch_two_workers, worker_computing_a_pair
 
 
 def _requests(n_views: int = 12) -> DynamicRequest:
@@ -29,24 +28,10 @@ def _requests(n_views: int = 12) -> DynamicRequest:
     return DynamicRequest(views=views, turns_deg=[v.commanded_turn_deg for v in scan.views])
 
 
-def _health(group, instance: str) -> Health | None:  # noqa: ANN001
-    try:
-        return request_sync(group.session, keys.health("registration", instance), timeout=2)
-    except ObjscanError:
-        return None
-
-
 @pytest.mark.slow
 def test_a_killed_worker_has_its_pair_job_finished_by_another(service_group):
     request = _requests()
-    service_group.launch([ProcessSpec("services.registration", ["--instance", "w1"], service="registration",
-                                      name="w1"),
-                          ProcessSpec("services.registration", ["--instance", "w2"], service="registration",
-                                      name="w2")], timeout=180)
-    deadline = time.monotonic() + 30
-    while len([i for s, i in live_services(service_group.session) if s == "registration"]) < 2:
-        assert time.monotonic() < deadline
-        time.sleep(0.2)
+    launch_two_workers(service_group)
     result: dict[str, object] = {}
 
     def run() -> None:
@@ -54,14 +39,8 @@ def test_a_killed_worker_has_its_pair_job_finished_by_another(service_group):
 
     t = threading.Thread(target=run)
     t.start()
-    victim = None
-    deadline = time.monotonic() + 300
-    while victim is None and time.monotonic() < deadline:  # kill the worker that is not coordinating, mid-job
-        for inst in ("w1", "w2"):
-            h = _health(service_group, inst)
-            if h is not None and h.info.get("coordinating", 0) == 0 and h.info.get("pairs_running", 0) > 0:
-                victim = inst
-        time.sleep(0.05)
+    deadline = time.monotonic() + 300  # kill the worker that is not coordinating, mid-job
+    victim = worker_computing_a_pair(service_group, lambda: time.monotonic() < deadline)
     assert victim is not None, "no worker ever took a pair job"
     service_group.kill(victim)
     t.join(900)

@@ -4,16 +4,15 @@ model's) and answers exactly what the job gives when run here; a killed worker's
 from __future__ import annotations
 
 import threading
-import time
 
 import numpy as np
 import pytest
 
 from common import keys
-from common.client import live_services, request_sync
-from common.errors import ObjscanError
+from common.client import request_sync
 from common.launcher import ProcessSpec
 from tests.conftest import shared_data
+from tests.registration.workers import launch_two_workers, worker_computing_a_pair
 
 
 def _job():
@@ -40,36 +39,18 @@ def test_a_pair_job_sent_to_registration_pair_comes_back_as_computed_here(servic
     assert np.allclose(there.T, here.T, atol=1e-9) and abs(there.fitness - here.fitness) < 1e-9
 
 
-def _health(group, instance: str):  # noqa: ANN001, ANN202
-    try:
-        return request_sync(group.session, keys.health("registration", instance), timeout=2)
-    except ObjscanError:
-        return None
-
-
 @pytest.mark.slow
 def test_a_pair_job_whose_worker_is_killed_is_finished_by_another(service_group):
     from services.registration.pair_wire import PairResultMessage, pair_job_message
 
     msg = pair_job_message(_job())
-    service_group.launch([ProcessSpec("services.registration", ["--instance", i], service="registration", name=i)
-                          for i in ("w1", "w2")], timeout=180)
-    deadline = time.monotonic() + 30
-    while len([i for s, i in live_services(service_group.session) if s == "registration"]) < 2:
-        assert time.monotonic() < deadline
-        time.sleep(0.2)
+    launch_two_workers(service_group)
     for _attempt in range(4):  # the job may land on the coordinating instance itself: then ask again
         result: dict[str, object] = {}
         t = threading.Thread(target=lambda out=result: out.update(
             reply=request_sync(service_group.session, keys.REGISTRATION_PAIR, msg, timeout=600)))
         t.start()
-        victim = None
-        while victim is None and t.is_alive():  # the worker running the job, not the one coordinating
-            for inst in ("w1", "w2"):
-                h = _health(service_group, inst)
-                if h is not None and h.info.get("coordinating", 0) == 0 and h.info.get("pairs_running", 0) > 0:
-                    victim = inst
-            time.sleep(0.05)
+        victim = worker_computing_a_pair(service_group, t.is_alive)  # running the job, not coordinating
         if victim is not None:
             service_group.kill(victim)
         t.join(600)
