@@ -28,6 +28,10 @@ POSE_SOURCE_KEY = "pose_source"
 """``frame.meta`` key saying where ``T_base_camera`` came from: ``given`` (passed to capture), ``recorded``
 (replay), ``sim`` (the twin's belief), or ``unknown`` (no pose was given: the identity stands in)."""
 
+LIVE_POSE_SOURCES = ("given", "sim")
+"""Pose sources of a live frame, which a hand-eye calibration corrects; a recorded pose was stamped (and
+corrected) when recorded, and an unknown one must stay recognisable as the identity."""
+
 
 @dataclass
 class CameraConfig:
@@ -100,6 +104,10 @@ class Camera(ABC):
     computed by the service) and returns an aligned ``RGBDFrame`` stamped with it. Backends that know
     better (replay: the recorded pose) say so in ``frame.meta['pose_source']``.
     """
+
+    pose_from_arm: ClassVar[bool] = False
+    """True when the backend stamps the pose passed to ``capture``: the service then asks the arm for it
+    (a real camera knows nothing of where it is; the twin and a replay know better)."""
 
     def __init__(self, config: CameraConfig):
         self.config = config
@@ -200,5 +208,5 @@ def stamp_pose(frame_meta: dict[str, Any], T_given: np.ndarray | None) -> np.nda
     return T_given.copy()
 
 
-__all__ = ["POSE_SOURCE_KEY", "Camera", "CameraConfig", "CameraError", "check_frame", "check_pose",
+__all__ = ["LIVE_POSE_SOURCES", "POSE_SOURCE_KEY", "Camera", "CameraConfig", "CameraError", "check_frame", "check_pose",
            "stamp_pose"]

@@ -1,12 +1,14 @@
 """The camera service's Zenoh face: ``objscan/{robot}/camera/capture`` → one ``RGBDFrame``.
 
-The backend (sim, realsense, replay) is chosen at start; the orchestrator cannot tell them apart. For
-real cameras the frame is stamped with the camera pose the arm believes (asked from ``arm/state``); the
-sim's twin stamps its own belief; a replay returns what was recorded.
+The backend (a name of ``services/camera/registry.py``) is chosen at start and built from the registry; the
+service only calls the ``Camera`` interface, and the orchestrator cannot tell backends apart. A backend
+whose frames are stamped with the pose given (``pose_from_arm``: realsense) gets the camera pose the arm
+believes (asked from ``arm/state``); the sim's twin stamps its own belief; a replay returns what was
+recorded; a PNG folder has no pose (``unknown``).
 
 A hand-eye calibration file (``--hand-eye FILE`` or ``$OBJSCAN_HAND_EYE``, written by ``objscan calibrate
-hand-eye``) is loaded at start and corrects every live frame's pose (sim and realsense, not replay, whose
-poses were stamped when recorded); the frame's ``meta["hand_eye"]`` says which file and correction.
+hand-eye``) is loaded at start and corrects every live frame's pose (pose source ``given`` or ``sim``; not a
+replay's, stamped when recorded, nor an unknown one); the frame's ``meta["hand_eye"]`` says which file and correction.
 """
 
 from __future__ import annotations
@@ -22,8 +24,8 @@ from common.errors import ObjscanError
 from common.messages import JointState, RGBDFrame
 from common.runtime import COMMAND_BUDGET, QueryContext, Service, run_service, service_arg_parser, settings_from_args
 from services.calibration.file import calibration_from_env
-from services.camera.base import POSE_SOURCE_KEY
-from services.camera.factory import make_camera
+from services.camera.base import LIVE_POSE_SOURCES, POSE_SOURCE_KEY
+from services.camera.registry import BACKENDS, CameraContext, backend_option, camera_from_options
 
 
 class CameraService(Service):
@@ -32,21 +34,9 @@ class CameraService(Service):
     async def setup(self) -> None:
         opts = self.settings.options
         self.backend = opts.get("backend", "sim")
-        config: dict[str, object] = {"backend": self.backend}
-        if self.backend == "sim":
-            # generous: the twin renders in ~60 ms, but a loaded 2-core machine can stall it for seconds
-            config.update(width=opts.get("width", 640), height=opts.get("height", 480), timeout_s=60.0)
-        elif self.backend == "realsense":
-            config.update(width=opts.get("width", 640), height=opts.get("height", 480),
-                          serial=opts.get("serial"), visual_preset=opts.get("visual_preset", "high_accuracy"),
-                          lock_exposure=not opts.get("no_exposure_lock", False))
-            if opts.get("playback"):
-                config["playback_file"] = opts["playback"]
-        elif self.backend == "replay":
-            config["session_dir"] = opts["session"]
         # a broken or missing calibration file stops the start: stamping uncorrected poses would be silent
         self.hand_eye, self.hand_eye_path = calibration_from_env(opts.get("hand_eye"))
-        self.camera = make_camera(config, render_request=self._render if self.backend == "sim" else None)
+        self.camera, _ = camera_from_options(self.backend, opts, CameraContext(render_request=self._render))
         await self.run_cpu(self.camera.connect)
         self.captures = 0
         self.queryable(keys.camera_capture(self.robot), self.capture, budget=COMMAND_BUDGET)
@@ -65,13 +55,9 @@ class CameraService(Service):
         return state.T_base_camera if isinstance(state, JointState) else None
 
     async def capture(self, msg: Message | None, ctx: QueryContext) -> RGBDFrame:
-        if self.backend == "sim":
-            frame = await self.camera.acapture(None)
-        else:
-            pose = await self._arm_camera_pose() if self.backend == "realsense" else None
-            frame = await self.run_cpu(self.camera.capture, pose)
-        # correct live poses only: a replay's were stamped when recorded, an unknown one stays recognisable
-        if self.hand_eye is not None and self.backend != "replay" and frame.meta.get(POSE_SOURCE_KEY) != "unknown":
+        pose = await self._arm_camera_pose() if self.camera.pose_from_arm else None
+        frame = await self.camera.acapture(pose)
+        if self.hand_eye is not None and frame.meta.get(POSE_SOURCE_KEY) in LIVE_POSE_SOURCES:
             frame.T_base_camera = self.hand_eye.apply(frame.T_base_camera)
             frame.meta = {**(frame.meta or {}), "hand_eye": {
                 "file": self.hand_eye_path, "correction": self.hand_eye.correction.tolist(),
@@ -88,7 +74,8 @@ class CameraService(Service):
 
 def main() -> None:
     p = service_arg_parser("objscan camera service")
-    p.add_argument("--backend", choices=["sim", "realsense", "replay", "real"], default="sim")
+    p.add_argument("--backend", choices=list(BACKENDS), default="sim",
+                   help="camera backend (services/camera/registry.py; default: %(default)s)")
     p.add_argument("--width", type=int, default=640)
     p.add_argument("--height", type=int, default=480)
     p.add_argument("--session", help="replay: the session folder to serve frames from")
@@ -102,13 +89,15 @@ def main() -> None:
                    help="realsense: keep auto exposure / white balance on (default: locked after warm-up)")
     p.add_argument("--hand-eye", default=None, metavar="FILE",
                    help="hand-eye calibration file to correct poses with (default: env OBJSCAN_HAND_EYE)")
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE", type=backend_option,
+                   help="a backend's own option (repeatable), e.g. png_folder: --option folder=DIR")
     args = p.parse_args()
-    backend = "realsense" if args.backend == "real" else args.backend
-    if backend == "replay" and not args.session:
-        p.error("--backend replay needs --session SESSION_DIR")
-    run_service(lambda: CameraService(settings_from_args(args, backend=backend, width=args.width,
-                                                         height=args.height, session=args.session,
-                                                         playback=args.playback, hand_eye=args.hand_eye,
-                                                         serial=args.serial, no_exposure_lock=args.no_exposure_lock,
-                                                         visual_preset=None if args.visual_preset == "none"
-                                                         else args.visual_preset)))
+    options = dict(backend=args.backend, width=args.width, height=args.height, session=args.session,
+                   playback=args.playback, hand_eye=args.hand_eye, serial=args.serial,
+                   no_exposure_lock=args.no_exposure_lock,
+                   visual_preset=None if args.visual_preset == "none" else args.visual_preset)
+    for key, value in args.option:
+        if key in options:
+            p.error(f"--option {key}=...: use the flag --{key.replace('_', '-')}")
+        options[key] = value
+    run_service(lambda: CameraService(settings_from_args(args, **options)))

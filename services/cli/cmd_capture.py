@@ -1,8 +1,10 @@
 """``objscan capture``: one RGB-D frame through the camera service, written as color.png, depth.png, meta.json.
 
 With ``--backend sim`` it starts the twin, the arm and the camera (when not running), places ``--object`` on
-the table, moves the camera to the locate pose and captures; ``realsense`` and ``replay`` need only the
-camera service. The files follow the session folder layout (docs/session-folder.md).
+the table, moves the camera to the locate pose and captures; any other camera backend of
+``services/camera/registry.py`` (``realsense``, ``replay``, ``png_folder``, ...) needs only the camera
+service, its own options given with ``--option KEY=VALUE``.
+The files follow the session folder layout (docs/session-folder.md).
 """
 
 from __future__ import annotations
@@ -21,6 +23,9 @@ from common.errors import ObjscanError
 from common.messages import Request
 from common.session_folder import atomic_write_bytes, atomic_write_json
 from common.zenoh_config import DEFAULT_ROUTER_PORT
+from services.camera.registry import BACKENDS as CAMERA_BACKENDS
+from services.camera.registry import backend_option
+from services.cell import CELLS, needs_twin
 from services.cli.cells import add_network_args, remote_session
 from services.cli.cmd_scan import console, ensure_cell
 from services.orchestrator.config import AcquisitionConfig
@@ -31,13 +36,17 @@ def register(sub) -> None:  # noqa: ANN001
     p = sub.add_parser("capture", help="capture one RGB-D frame to a folder",
                        description="Capture one frame (color.png, 16-bit depth.png, meta.json with intrinsics, "
                                    "depth_scale and T_base_camera) through the camera service.")
-    p.add_argument("--backend", choices=["sim", "realsense", "replay"], default="sim")
+    p.add_argument("--backend", choices=list(CAMERA_BACKENDS), default="sim",
+                   help="camera backend (services/camera/registry.py); sim starts the twin and the arm too")
     p.add_argument("--object", default="milk", help="sim: HOPE object name or mesh path")
     p.add_argument("--profile", default="ideal", help="sim: error profile")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--width", type=int, default=640)
     p.add_argument("--height", type=int, default=480)
     p.add_argument("--session", help="replay: session folder to read frames from")
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE", type=backend_option,
+                   help="a camera backend's own option, passed to the camera service (repeatable), e.g. "
+                        "--backend png_folder --option folder=DIR --option intrinsics=fx,fy,cx,cy")
     p.add_argument("--out", required=True, help="folder to write color.png, depth.png, meta.json")
     p.add_argument("--port", type=int, default=DEFAULT_ROUTER_PORT)
     add_network_args(p)
@@ -64,8 +73,11 @@ def _capture(s, args, robot: str):  # noqa: ANN001, ANN202 - zenoh session, argp
 def run(args) -> int:  # noqa: ANN001
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    services = ["sim", "arm", "camera"] if args.backend == "sim" else ["camera"]
-    extra = {"camera": ["--session", args.session]} if args.backend == "replay" and args.session else None
+    backends = CELLS["sim"] if args.backend == "sim" else {"camera": args.backend}
+    services = (["sim"] if needs_twin(backends) else []) + list(backends)
+    camera = ["--session", args.session] if args.session else []
+    camera += [a for key, value in args.option for a in ("--option", f"{key}={value}")]
+    extra = {"camera": camera} if camera else None
     robot = keys.DEFAULT_ROBOT
     if args.connect:  # a running cell elsewhere: use its services, start nothing
         try:
@@ -78,7 +90,7 @@ def run(args) -> int:  # noqa: ANN001
         finally:
             session.close()
     else:
-        with ensure_cell(args.port, args.backend, out / "logs", services=services, extra_args=extra) as group:
+        with ensure_cell(args.port, backends, out / "logs", services=services, extra_args=extra) as group:
             frame, ms = _capture(group.session, args, robot)
     import io
 

@@ -20,6 +20,7 @@ import socket
 import sys
 import tempfile
 import time
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +34,7 @@ from common.errors import ObjscanError
 from common.launcher import ServiceGroup
 from common.messages import Ok, Request
 from common.zenoh_config import DEFAULT_ROUTER_PORT, free_tcp_port
-from services.cell import SERVICE_MODULES, cell_specs
+from services.cell import SERVICE_MODULES, cell_specs, needs_twin
 from services.cli.cells import add_network_args, remote_session, session_name
 from services.cli.outcome import USAGE, one_line, print_json, report_error
 from services.live import add_live_args, live_requested, open_live_view
@@ -104,7 +105,7 @@ def _claim_cell(port: int) -> int | None:
     return fd
 
 
-def ensure_cell(port: int | None, backend: str, log_dir: Path, services: list[str] | None = None,
+def ensure_cell(port: int | None, backend: str | Mapping[str, str], log_dir: Path, services: list[str] | None = None,
                 extra_args: dict[str, list[str]] | None = None) -> ServiceGroup:
     """Join the cell on ``port``; start the router and whatever of ``services`` (default: all) is missing.
 
@@ -134,7 +135,7 @@ def ensure_cell(port: int | None, backend: str, log_dir: Path, services: list[st
             raise
     live = {s for s, _ in live_services(group.session, timeout=1.0)}
     wanted = services or list(SERVICE_MODULES)
-    needed = [s for s in wanted if s not in live and not (s == "sim" and backend != "sim")]
+    needed = [s for s in wanted if s not in live and not (s == "sim" and not needs_twin(backend))]
     if needed:
         console.print(f"starting services: {', '.join(needed)} (logs in {log_dir})")
         try:

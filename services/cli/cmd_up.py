@@ -14,7 +14,7 @@ from pathlib import Path
 from common.errors import ObjscanError
 from common.launcher import ServiceGroup
 from common.zenoh_config import DEFAULT_ROUTER_PORT
-from services.cell import SERVICE_MODULES, cell_specs
+from services.cell import CELLS, SERVICE_MODULES, cell_specs
 from services.cli.cells import add_network_args, network_settings
 
 
@@ -22,8 +22,9 @@ def register(sub) -> None:  # noqa: ANN001
     p = sub.add_parser("up", help="start every service (sim backends by default) and keep them running",
                        description="Start a Zenoh router on loopback and every objscan service as its own "
                                    "process. Ctrl-C (or SIGTERM) stops them all cleanly.")
-    p.add_argument("--backend", choices=["sim", "real", "replay"], default="sim",
-                   help="hardware backends for camera and arm (default: %(default)s)")
+    p.add_argument("--backend", choices=list(CELLS), default="sim",
+                   help="the cell's hardware backends for camera and arm (services/cell.py CELLS; "
+                        "default: %(default)s)")
     p.add_argument("--robot-config", help="robot configuration YAML for the dynamixel arm (default: PAPRAS, "
                                           "services/arm/robot/papras_dynamixel.yaml); see docs/arm.md")
     p.add_argument("--emulate-bus", action="store_true",
@@ -57,7 +58,6 @@ def run(args) -> int:  # noqa: ANN001
     if unknown:
         print(f"unknown services: {', '.join(sorted(unknown))}")
         return 2
-    backend = {"real": "real", "sim": "sim", "replay": "replay"}[args.backend]
     try:
         extra = arm_args(args)
     except ObjscanError as exc:  # a bad robot configuration: say which key, start nothing
@@ -70,7 +70,7 @@ def run(args) -> int:  # noqa: ANN001
         if args.connect:  # join a running router (TLS variables honoured) instead of starting one
             group.settings = network_settings(args.connect)
             group.endpoint = args.connect
-        specs = cell_specs(names, backend=backend, extra_args=extra)
+        specs = cell_specs(names, backend=args.backend, extra_args=extra)
         what = f"joining {group.endpoint} with" if args.connect else f"starting router on {group.endpoint} and"
         print(f"{what} {len(specs)} services (logs in {args.log_dir}/)")
         group.launch(specs)

@@ -104,6 +104,7 @@ class RealSenseCamera(Camera):
     """A D435 through pyrealsense2 (live, playback, or an injected device such as a software D435)."""
 
     config: RealSenseCameraConfig
+    pose_from_arm = True
 
     def __init__(self, config: RealSenseCameraConfig | None = None, *, device: Any = None):
         """``device``: an ``rs.device`` to stream from instead of searching USB (tests, emulation)."""
