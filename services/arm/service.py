@@ -145,7 +145,8 @@ class ArmService(Service):
 
 def main() -> None:
     p = service_arg_parser("objscan arm service (PAPRAS: pinocchio IK, Ruckig motion, collision checks)")
-    p.add_argument("--backend", choices=[*BACKENDS, "real"], default="sim", help="real = dynamixel")
+    p.add_argument("--backend", choices=list(BACKENDS), default="sim",
+                   help="arm driver (services/arm/drivers/registry.py; default: %(default)s)")
     p.add_argument("--robot-config", default=os.environ.get("OBJSCAN_ROBOT_CONFIG"),
                    help="dynamixel: robot configuration YAML (default: env OBJSCAN_ROBOT_CONFIG, else the PAPRAS "
                         "one shipped in services/arm/robot/papras_dynamixel.yaml)")
@@ -155,7 +156,6 @@ def main() -> None:
                    help="dynamixel: an emulated bus of the configured servos whose positions drive the twin")
     p.add_argument("--session", help="replay: session folder whose recorded joints to report")
     args = p.parse_args()
-    backend = "dynamixel" if args.backend == "real" else args.backend
     run_service(lambda: ArmService(settings_from_args(
-        args, backend=backend, port=args.port, baud=args.baud, session=args.session,
+        args, backend=args.backend, port=args.port, baud=args.baud, session=args.session,
         robot_config=args.robot_config, emulate_bus=args.emulate_bus)))

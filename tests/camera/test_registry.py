@@ -1,0 +1,56 @@
+"""Backend names are spelled once: the camera and arm registries; cells, the CLI and compose use them."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from services.arm.drivers.registry import BACKENDS as ARM_BACKENDS
+from services.camera.base import Camera
+from services.camera.errors import CameraConfigError
+from services.camera.registry import BACKENDS, backend_option, camera_entry, make_camera
+from services.cell import CELLS, cell_specs, needs_twin
+from tests.conftest import REPO
+
+
+def test_every_camera_backend_resolves_to_its_folder_entry():
+    assert set(BACKENDS) == {"sim", "realsense", "replay", "png_folder"}
+    for name in BACKENDS:
+        entry = camera_entry(name)
+        assert entry.name == name and entry.config_class.backend == name and entry.description
+    with pytest.raises(CameraConfigError) as err:
+        camera_entry("webcam")
+    assert err.value.code == "bad_config" and err.value.detail["known"] == sorted(BACKENDS)
+
+
+def test_options_build_the_named_backend_through_the_interface(tmp_path):
+    cam = make_camera(camera_entry("replay").config_from_options({"session": str(tmp_path)}))
+    assert isinstance(cam, Camera) and cam.info()["backend"] == "replay" and not cam.pose_from_arm
+    rs = camera_entry("realsense").config_from_options({"width": 848, "no_exposure_lock": True, "playback": "x.db3"})
+    assert (rs.width, rs.lock_exposure, rs.playback_file) == (848, False, "x.db3")
+    assert make_camera(rs).pose_from_arm  # the only backend stamped with the arm's belief
+    assert backend_option("depth-scale=0.002") == ("depth_scale", "0.002")
+    with pytest.raises(ValueError):
+        backend_option("folder")
+
+
+def test_cells_name_registry_backends_and_start_them():
+    for cell, backends in CELLS.items():
+        assert backends["camera"] in BACKENDS and backends["arm"] in ARM_BACKENDS, cell
+    specs = {s.service: s.args for s in cell_specs(backend="real")}
+    assert specs["camera"] == ["--backend", "realsense"] and specs["arm"] == ["--backend", "dynamixel"]
+    assert specs["registration"] == []
+    only = cell_specs(["camera"], backend={"camera": "png_folder"}, extra_args={"camera": ["--option", "folder=x"]})
+    assert only[0].args == ["--backend", "png_folder", "--option", "folder=x"]
+    assert needs_twin("sim") and not needs_twin("real") and not needs_twin({"camera": "replay"})
+
+
+def test_compose_files_start_registry_backends():
+    files = [REPO / "docker-compose.yml", *sorted((REPO / "deploy").glob("docker-compose*.yml"))]
+    seen = 0
+    for path in files:
+        for module, backend in re.findall(r'"services\.(camera|arm)",\s*"--backend",\s*"([^"]+)"', path.read_text()):
+            assert backend in (BACKENDS if module == "camera" else ARM_BACKENDS), (path.name, module, backend)
+            seen += 1
+    assert seen >= 4  # sim and real cells, camera and arm
