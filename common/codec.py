@@ -154,11 +154,6 @@ def encode(msg: Message) -> bytes:
     return b"".join(chunks)
 
 
-def _to_wire(msg: Message) -> dict[str, Any]:
-    """The message as plain msgpack-able Python objects (for tests and tools that want the map)."""
-    return msgpack.unpackb(encode(msg), raw=False)
-
-
 # ----------------------------------------------------------------------------------------------- decode
 
 def decode(payload: bytes | bytearray | memoryview, *, max_bytes: int = MAX_PAYLOAD_BYTES,

@@ -13,7 +13,6 @@ ROOT = "objscan"
 
 ALIVE_PREFIX = f"{ROOT}/@alive"
 ALL_ALIVE = f"{ALIVE_PREFIX}/**"
-ALL_HEALTH = f"{ROOT}/**/health"
 
 
 def alive(service: str, instance: str) -> str:
@@ -35,10 +34,6 @@ def parse_alive(key: str) -> tuple[str, str] | None:
 # camera
 def camera_capture(robot: str = DEFAULT_ROBOT) -> str:
     return f"{ROOT}/{robot}/camera/capture"
-
-
-def camera_frames(robot: str = DEFAULT_ROBOT) -> str:
-    return f"{ROOT}/{robot}/camera/frames"
 
 
 # arm
