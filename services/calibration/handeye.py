@@ -127,10 +127,6 @@ def solve(samples: list[Sample], K: np.ndarray, spec: CharucoSpec) -> dict[str, 
     return out
 
 
-def _pack(T: np.ndarray) -> np.ndarray:
-    return np.concatenate([Rotation.from_matrix(T[:3, :3]).as_rotvec(), T[:3, 3]])
-
-
 def _unpack(p: np.ndarray) -> np.ndarray:
     return make_transform(Rotation.from_rotvec(p[:3]).as_matrix(), p[3:6])
 

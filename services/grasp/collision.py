@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from services.grasp.boxes import OrientedBox, boxes_overlap, orthonormal_frame_from_axis, points_in_box
+from services.grasp.boxes import OrientedBox, boxes_overlap, orthonormal_frame_from_axis
 from services.grasp.config import GraspPlannerConfig
 
 
@@ -78,12 +78,6 @@ def palm_box(R: np.ndarray, tcp: np.ndarray, cfg: GraspPlannerConfig) -> Oriente
 
 def inflate(box: OrientedBox, margin: float) -> OrientedBox:
     return OrientedBox(box.center, box.rotation, box.half_extents + margin)
-
-
-def hits_object(box: OrientedBox, points: np.ndarray, min_points: int) -> int:
-    """Number of object points inside the box when it reaches ``min_points``, else 0."""
-    n = int(np.count_nonzero(points_in_box(box, points)))
-    return n if n >= min_points else 0
 
 
 def first_overlap(boxes: dict[str, OrientedBox], obstacle: OrientedBox, margin: float) -> str | None:

@@ -320,11 +320,6 @@ def charuco_object() -> SimObject:
                      triangle_material_ids=mats, scale=1.0, up_axis="z")
 
 
-def clear_cache() -> None:
-    with _CACHE_LOCK:
-        _CACHE.clear()
-
-
 def _parse(name: str, path: Path, scale: float, up_axis: str) -> SimObject:
     try:
         mesh = o3d.io.read_triangle_mesh(str(path), enable_post_processing=False, print_progress=False)

@@ -121,14 +121,6 @@ def table_mesh(spec: TableSpec) -> o3d.geometry.TriangleMesh:
     return box
 
 
-def table_colors(spec: TableSpec, xy: np.ndarray) -> np.ndarray:
-    """Albedo of the table at base-frame points ``xy`` (N, 2) (nearest texel; clamped at the rim)."""
-    tex = table_texture(spec)
-    col = ((xy[:, 0] - (spec.center_xy[0] - spec.size_xy[0] / 2)) / spec.texel_m).astype(np.int64)
-    row = ((xy[:, 1] - (spec.center_xy[1] - spec.size_xy[1] / 2)) / spec.texel_m).astype(np.int64)
-    return tex[np.clip(row, 0, tex.shape[0] - 1), np.clip(col, 0, tex.shape[1] - 1)]
-
-
 class RenderScene:
     """The static geometry of one world state, with its ray-casting BVH built once.
 
