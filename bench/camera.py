@@ -31,7 +31,7 @@ def _poses(n: int) -> list[np.ndarray]:
 
 
 def service_figures(n: int) -> dict[str, Any]:
-    from services.sim.sensor_model import d435_intrinsics
+    from common.messages import d435_intrinsics
     from services.sim.world import World, default_object_pose
 
     world = World("milk", profile="ideal", seed=0, object_pose=default_object_pose(0.6, 0.0))

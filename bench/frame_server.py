@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from common.messages import Intrinsics, RGBDFrame
+from common.messages import RGBDFrame, d435_intrinsics
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
 
 FRAME_KEY = "objscan/bench/frame"
@@ -14,7 +14,7 @@ def make_frame(seed: int = 0) -> RGBDFrame:
     rng = np.random.default_rng(seed)
     return RGBDFrame(color=rng.integers(0, 255, (480, 848, 3), dtype=np.uint8),
                      depth=rng.integers(300, 3000, (480, 848), dtype=np.uint16),
-                     intrinsics=Intrinsics(width=848, height=480, fx=615.0, fy=615.0, cx=424.0, cy=240.0),
+                     intrinsics=d435_intrinsics(848, 480),
                      T_base_camera=np.eye(4))
 
 

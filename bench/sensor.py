@@ -59,10 +59,10 @@ def graspnet_frame() -> DepthFigures | None:
 
 def twin_scenes(quick: bool = False) -> list[tuple[np.ndarray, np.ndarray, float]]:
     """Perfect (depth, colour, fx) frames of the twin seen like the real frames."""
+    from common.messages import d435_intrinsics
     from services.sim.catalogue import hope_names
     from services.sim.render import render
     from services.sim.scenario import camera_look_at
-    from services.sim.sensor_model import d435_intrinsics
     from services.sim.world import World
 
     K = d435_intrinsics()
@@ -81,7 +81,8 @@ def twin_scenes(quick: bool = False) -> list[tuple[np.ndarray, np.ndarray, float
 
 def measure_twin(scenes, noise, seed: int = 0) -> list[DepthFigures]:
     """Figures of the twin's frames degraded by ``noise`` (a ``D435Noise``), quantised to 1 mm as a D435 is."""
-    from services.sim.sensor_model import apply_d435_noise, d435_intrinsics
+    from common.messages import d435_intrinsics
+    from services.sim.sensor_model import apply_d435_noise
 
     K = d435_intrinsics()
     figs = []

@@ -46,6 +46,26 @@ class Intrinsics(Message):
                    cx=float(d["cx"]), cy=float(d["cy"]))
 
 
+D435_COLOR_FOCAL_PX = 615.0
+"""Typical focal length (px) of a D435 colour stream at 480 rows (640x480 and 848x480 alike)."""
+
+D435_COLOR_SIZES = ((640, 480), (848, 480))
+"""The D435 colour modes the camera's sim backend and the twin's render key accept."""
+
+
+def d435_intrinsics(width: int = 640, height: int = 480) -> Intrinsics:
+    """The D435 colour camera model, the one definition of it (twin, camera backends, default frame).
+
+    A real D435 reports its own factory calibration (the realsense backend uses that); these are the typical
+    values: fx = fy = 615 px at 480 rows, principal point at the image centre. Other sizes (tests render
+    small images) scale the focal length with the height. Raises ``bad_value`` for a non-positive size.
+    """
+    f = D435_COLOR_FOCAL_PX * height / 480.0
+    K = Intrinsics(width=int(width), height=int(height), fx=f, fy=f, cx=width / 2.0, cy=height / 2.0)
+    K.validate()
+    return K
+
+
 @dataclass(kw_only=True)
 class RGBDFrame(Message):
     """One aligned RGB-D capture with the camera pose in ``base`` as the robot believes it.
@@ -57,8 +77,7 @@ class RGBDFrame(Message):
     color: np.ndarray = array_field("u1", (None, None, 3))
     depth: np.ndarray = array_field("<u2", (None, None))
     depth_scale: float = 0.001
-    intrinsics: Intrinsics = field(
-        default_factory=lambda: Intrinsics(width=640, height=480, fx=615.0, fy=615.0, cx=320.0, cy=240.0))
+    intrinsics: Intrinsics = field(default_factory=d435_intrinsics)
     T_base_camera: np.ndarray = array_field("<f8", (4, 4))
     stamp: float = 0.0
     seq: int = 0

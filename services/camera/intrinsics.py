@@ -1,24 +1,17 @@
-"""D435 intrinsics presets shared by the sim backend, the sim renderer and the software-device tests.
+"""The D435 colour modes the camera accepts, and the depth-imager presets of the software-device tests.
 
-A real D435 reports its own factory calibration and the realsense backend always uses that; these
-presets are the *typical* values, so the digital twin renders with the numbers a real unit would give
-(color: fx = fy ~ 615 px at 640x480 and 848x480, principal point at the image centre) and the two stay in
-one place. The depth presets and the depth-to-color offset are used only to emulate an unaligned D435
-(pyrealsense2 software device) in tests.
+The colour model itself (fx = fy = 615 px at 480 rows, principal point at the centre) is defined once,
+``common.messages.d435_intrinsics``: the twin renders with it and the sim backend checks against it. A real
+D435 reports its own factory calibration and the realsense backend always uses that. The depth presets and
+the depth-to-color offset are used only to emulate an unaligned D435 (pyrealsense2 software device) in tests.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from common.messages import Intrinsics
+from common.messages import D435_COLOR_SIZES, Intrinsics, d435_intrinsics
 from services.camera.errors import CameraConfigError
-
-D435_COLOR_PRESETS: dict[tuple[int, int], tuple[float, float, float, float]] = {
-    (640, 480): (615.0, 615.0, 320.0, 240.0),
-    (848, 480): (615.0, 615.0, 424.0, 240.0),
-}
-"""(width, height) -> (fx, fy, cx, cy) of the D435 color (RGB) camera."""
 
 D435_DEPTH_PRESETS: dict[tuple[int, int], tuple[float, float, float, float]] = {
     (640, 480): (383.0, 383.0, 320.0, 240.0),
@@ -45,8 +38,12 @@ def _lookup(presets: dict[tuple[int, int], tuple[float, float, float, float]], w
 
 
 def d435_color_intrinsics(width: int = 640, height: int = 480) -> Intrinsics:
-    """Typical D435 color intrinsics for a supported size (a fresh object each call)."""
-    return _lookup(D435_COLOR_PRESETS, width, height, "color")
+    """Typical D435 color intrinsics for a colour mode of ``D435_COLOR_SIZES`` (``bad_config`` otherwise)."""
+    if (width, height) not in D435_COLOR_SIZES:
+        sizes = ", ".join(f"{w}x{h}" for w, h in D435_COLOR_SIZES)
+        raise CameraConfigError(f"no D435 color preset for {width}x{height}; known: {sizes}",
+                                detail={"width": width, "height": height})
+    return d435_intrinsics(width, height)
 
 
 def d435_depth_intrinsics(width: int = 640, height: int = 480) -> Intrinsics:

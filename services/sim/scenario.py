@@ -25,13 +25,12 @@ from typing import Any
 import numpy as np
 
 from common.geometry import look_at
-from common.messages import Intrinsics, RGBDFrame
+from common.messages import Intrinsics, RGBDFrame, d435_intrinsics
 from common.session_folder import write_scan
 from common.session_folder import write_session as write_session_json
 from services.sim.catalogue import load_object
 from services.sim.errors import SimInputError
 from services.sim.profiles import ErrorProfile, get_profile, hand_turn
-from services.sim.sensor_model import d435_intrinsics
 from services.sim.world import World, default_object_pose
 
 

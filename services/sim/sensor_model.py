@@ -20,7 +20,6 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from common.messages import Intrinsics
 from services.sim.errors import SimInputError
 
 
@@ -105,16 +104,6 @@ def noise_field(kind: str, shape: tuple[int, ...], rng: np.random.Generator) -> 
         return gen(shape, dtype=np.float32)
     off = int(rng.integers(0, bank.size - n + 1))
     return bank[off:off + n].reshape(shape)
-
-
-def d435_intrinsics(width: int = 640, height: int = 480) -> Intrinsics:
-    """Typical D435 colour intrinsics (depth aligned to colour): fx = fy = 615 px at 640x480 and 848x480,
-    principal point at the image centre (the same numbers as ``services/camera/intrinsics.py``); other
-    heights scale the focal length."""
-    if width <= 0 or height <= 0:
-        raise SimInputError("image size must be positive", code="bad_value", detail={"width": width, "height": height})
-    f = 615.0 * height / 480.0
-    return Intrinsics(width=int(width), height=int(height), fx=f, fy=f, cx=width / 2.0, cy=height / 2.0)
 
 
 def depth_edges(depth_m: np.ndarray, threshold_m: float) -> tuple[np.ndarray, np.ndarray]:

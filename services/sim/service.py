@@ -27,9 +27,8 @@ from common.api import CaptureRequest, GripperRequest, GripperResult
 from common.codec import Message
 from common.errors import InvalidRequest
 from common.log import event
-from common.messages import JointState, Ok, Request, RGBDFrame
+from common.messages import D435_COLOR_SIZES, JointState, Ok, Request, RGBDFrame, d435_intrinsics
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
-from services.sim.sensor_model import d435_intrinsics
 from services.sim.state_file import StateFile, resolve_state_path
 from services.sim.world import World, default_object_pose
 
@@ -78,7 +77,7 @@ class SimService(Service):
     async def render(self, msg: Message | None, ctx: QueryContext) -> RGBDFrame:
         width = msg.width if isinstance(msg, CaptureRequest) and msg.width else 640
         height = msg.height if isinstance(msg, CaptureRequest) and msg.height else 480
-        if (width, height) not in ((640, 480), (848, 480)):
+        if (width, height) not in D435_COLOR_SIZES:
             raise InvalidRequest("the twin renders the D435 presets 640x480 and 848x480",
                                  detail={"width": width, "height": height})
         self.seq += 1

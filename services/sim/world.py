@@ -22,14 +22,13 @@ import zlib
 import numpy as np
 
 from common.geometry import invert, make_transform, rotation_about_axis
-from common.messages import Intrinsics, RGBDFrame
+from common.messages import Intrinsics, RGBDFrame, d435_intrinsics
 from services.sim.catalogue import SimObject, load_object, resolve_object
 from services.sim.errors import SimError, SimInputError, check_transform
 from services.sim.gripper import GraspChecker, GraspOutcome, GripperSpec
 from services.sim.physics import PHYSICS_MODES, PhysicsConfig, PhysicsScene, tilt_deg
 from services.sim.profiles import ErrorProfile, get_profile
 from services.sim.render import RenderResult, RenderScene, SceneBox, TableSpec, render
-from services.sim.sensor_model import d435_intrinsics
 
 #: Where an object stands by default (docs/conventions.md).
 DEFAULT_OBJECT_XY = (0.50, 0.0)

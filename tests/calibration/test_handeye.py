@@ -11,11 +11,11 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from common.geometry import invert, make_transform, transform_error
+from common.messages import d435_intrinsics
 from services.calibration import handeye
 from services.calibration.board import BoardError, CharucoSpec, detect
 from services.calibration.file import CalibrationError, HandEyeCalibration, load_calibration
 from services.calibration.poses import calibration_views
-from services.sim.sensor_model import d435_intrinsics
 from services.sim.world import World, default_object_pose
 
 pytestmark = pytest.mark.timeout(300)

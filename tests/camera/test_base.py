@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from common.messages import Intrinsics, RGBDFrame
+from common.messages import Intrinsics, RGBDFrame, d435_intrinsics
 from services.camera import (
     BadFrameError,
     CameraConfigError,
@@ -53,6 +53,11 @@ def test_d435_presets():
     np.testing.assert_allclose(d435_T_color_depth()[:3, :3], np.eye(3))
     with pytest.raises(CameraConfigError):
         d435_color_intrinsics(1280, 720)
+    # one D435 colour model: the twin's small test renders scale it, an unset frame carries it
+    assert d435_intrinsics(320, 240) == Intrinsics(width=320, height=240, fx=307.5, fy=307.5, cx=160.0, cy=120.0)
+    frame = RGBDFrame(color=np.zeros((480, 640, 3), np.uint8), depth=np.zeros((480, 640), np.uint16),
+                      T_base_camera=np.eye(4))
+    assert frame.intrinsics == d435_color_intrinsics()
 
 
 def _frame(**kw) -> RGBDFrame:

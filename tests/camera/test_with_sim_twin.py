@@ -20,11 +20,6 @@ world_mod = pytest.importorskip("services.sim.world")
 pytestmark = pytest.mark.timeout(180)
 
 
-@pytest.mark.parametrize("size", [(640, 480), (848, 480)])
-def test_twin_uses_the_camera_presets(size):
-    assert sensor_model.d435_intrinsics(*size) == d435_color_intrinsics(*size)
-
-
 def test_sim_camera_on_the_twin():
     obj_xy = np.array([0.36, 0.0])
     world = world_mod.World("milk", profile="ideal", seed=3, object_pose=world_mod.default_object_pose(*obj_xy))

@@ -182,9 +182,9 @@ def test_materials_without_texture_keep_their_triangles_untextured(tmp_path):
     material ids must still pick the right one (the first triangle is grey, the second textured)."""
     from PIL import Image
 
+    from common.messages import d435_intrinsics
     from services.sim.catalogue import DEFAULT_COLOR
     from services.sim.render import Lighting, RenderScene, render
-    from services.sim.sensor_model import d435_intrinsics
 
     Image.fromarray(np.full((8, 8, 3), (10, 120, 250), np.uint8)).save(tmp_path / "blue.png")
     (tmp_path / "two.mtl").write_text("newmtl plain\nKd 1 0 0\nnewmtl tex\nmap_Kd blue.png\n")

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from common.geometry import invert, make_transform
+from common.messages import d435_intrinsics
 from services.sim.catalogue import load_object
 from services.sim.errors import SimInputError
 from services.sim.render import (
@@ -18,7 +19,7 @@ from services.sim.render import (
     TableSpec,
     render,
 )
-from services.sim.sensor_model import D435Noise, d435_intrinsics, depth_edges
+from services.sim.sensor_model import D435Noise, depth_edges
 from tests.sim.meshes import BOTTOM_LEFT, BOTTOM_RIGHT, TOP_LEFT, TOP_RIGHT, write_box_ply, write_textured_box_obj
 
 K = d435_intrinsics(640, 480)

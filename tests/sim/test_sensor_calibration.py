@@ -6,8 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from common.messages import d435_intrinsics
 from services.sim.sensor_metrics import edge_figures, measure_depth, table_plane_sigma
-from services.sim.sensor_model import D435Noise, apply_d435_noise, d435_intrinsics, occluded
+from services.sim.sensor_model import D435Noise, apply_d435_noise, occluded
 
 K = d435_intrinsics()  # 640x480, fx = fy = 615
 

@@ -14,9 +14,8 @@ from common.api import CaptureRequest
 from common.client import live_services, request_sync
 from common.geometry import make_transform
 from common.launcher import ProcessSpec
-from common.messages import Health, JointState, Ok, Request, RGBDFrame
+from common.messages import Health, JointState, Ok, Request, RGBDFrame, d435_intrinsics
 from services.sim.scenario import camera_look_at
-from services.sim.sensor_model import d435_intrinsics
 from services.sim.world import World
 from tests.sim.meshes import write_box_ply
 

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from common.geometry import make_transform, rotation_about_axis, rotation_angle_deg, transform_error
+from common.messages import d435_intrinsics
 from services.sim.catalogue import load_object
 from services.sim.errors import SimInputError
 from services.sim.gripper import GripperSpec
-from services.sim.sensor_model import d435_intrinsics
 from services.sim.world import DEFAULT_OBJECT_XY, SimStateError, World, default_object_pose, yaw_of
 from tests.sim.meshes import write_box_ply
 

@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from common.messages import Intrinsics, Ok, PointCloud, Request, RGBDFrame
+from common.messages import Ok, PointCloud, Request, RGBDFrame, d435_intrinsics
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
 
 
@@ -26,7 +26,7 @@ class EchoService(Service):
         self.frame = RGBDFrame(
             color=rng.integers(0, 255, (480, 848, 3), dtype=np.uint8),
             depth=rng.integers(0, 4000, (480, 848), dtype=np.uint16),
-            intrinsics=Intrinsics(width=848, height=480, fx=615.0, fy=615.0, cx=424.0, cy=240.0),
+            intrinsics=d435_intrinsics(848, 480),
             T_base_camera=np.eye(4))
         n = 300_000
         self.cloud = PointCloud(xyz=rng.normal(size=(n, 3)).astype(np.float32),
