@@ -5,7 +5,7 @@
 - ``render_ms_median``: the twin's ``World.render_frame`` called in this process on the same poses: the
   floor the service path is compared with (``service_vs_render_ratio``), measured in the same run.
 - In-process figures of every backend (software RealSense, .db3 playback, session replay) come from
-  ``services.camera.bench``.
+  ``bench/camera_backends.py``.
 Target: ``capture_ms_median`` <= 100 ms on this machine.
 """
 
@@ -62,7 +62,7 @@ def service_figures(n: int) -> dict[str, Any]:
 
 
 def run(quick: bool = False) -> dict[str, Any]:
-    from services.camera.bench import run as backend_run
+    from bench.camera_backends import run as backend_run
 
     figures = service_figures(10 if quick else 40)
     figures["backends"] = backend_run(quick=True)
