@@ -93,9 +93,9 @@ def _session_views(session):  # noqa: ANN001, ANN202
 
 def measure_session(session, rows: tuple[str, ...] = ("no_region", "pose_graph", "auto", "oracle")) -> dict:  # noqa: ANN001
     """Chamfer (mm) and seconds per row on a recorded acquisition's frames."""
+    from bench.synthetic import oracle_poses
     from services.registration.dynamic.combine import CombineConfig
     from services.registration.dynamic.model import DynamicConfig, build_model, fuse
-    from services.registration.dynamic.synthetic import oracle_poses
 
     views, gt, physics = _session_views(session)
     out: dict = {"session": str(session), "views": len(views), "physics": physics}
@@ -172,7 +172,7 @@ def measure_object(obj: str, profile: str, seed: int = 0, rows: tuple[str, ...] 
     for row in rows:
         t = time.perf_counter()
         if row == "oracle":
-            from services.registration.dynamic.synthetic import oracle_poses
+            from bench.synthetic import oracle_poses
 
             xyz = fuse(views, oracle_poses(views, gt), 0.001).xyz
             extra = {}
@@ -208,7 +208,7 @@ def _table(per_object: dict[str, dict], rows: tuple[str, ...]) -> dict:
 
 def run(quick: bool = False) -> dict:
     """Measure; returns one JSON-able dict (per profile: table, per-object figures, targets)."""
-    from services.registration.dynamic.synthetic import hope_objects
+    from bench.synthetic import hope_objects
 
     sessions = [p.strip() for p in os.environ.get("OBJSCAN_BENCH_SESSIONS", "").split(",") if p.strip()]
     if sessions:

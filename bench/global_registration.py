@@ -2,7 +2,7 @@
 
 Cases (all with exact ground truth):
 - ``hope``: neighbouring simulated views (~30 degrees apart, hand-turned profile) of the HOPE objects in
-  shared/data, from ``services.registration.dynamic.synthetic``. Two scenarios per pair:
+  shared/data, from ``bench.synthetic``. Two scenarios per pair:
   ``random`` - the source is first moved by a random rigid transform (what "global" must handle) and
   ``prerotated`` - the source is pre-rotated by its commanded turn about its estimated centre, as the
   paper's pre-processing does (what the pipeline actually feeds the global stage).
@@ -58,7 +58,7 @@ def _random_motion(rng: np.random.Generator, centre: np.ndarray) -> np.ndarray:
 
 
 def hope_cases(objects: list[str], pairs: list[int], seed: int = 0) -> list[Case]:
-    from services.registration.dynamic.synthetic import hope_objects, synthetic_views
+    from bench.synthetic import hope_objects, synthetic_views
 
     available = set(hope_objects())
     rng = np.random.default_rng(seed)

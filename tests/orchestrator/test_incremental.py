@@ -23,7 +23,7 @@ VIEWS = 4
 @pytest.fixture(scope="module")
 def view_results():
     shared_data("hope", "milk")
-    from services.registration.dynamic.synthetic import synthetic_views
+    from bench.synthetic import synthetic_views
 
     scan = synthetic_views("milk", views=12, profile="hand-turned", seed=3, voxel=0.003)
     out = []

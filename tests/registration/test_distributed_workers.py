@@ -16,7 +16,7 @@ from tests.registration.workers import launch_two_workers, worker_computing_a_pa
 
 
 def _requests(n_views: int = 12) -> DynamicRequest:
-    from services.registration.dynamic.synthetic import synthetic_views
+    from bench.synthetic import synthetic_views
 
     scan = synthetic_views("milk", views=n_views, seed=0)
     views = [ViewResult(view=v.index, cloud=PointCloud(xyz=np.asarray(v.xyz, np.float32),

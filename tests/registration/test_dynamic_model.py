@@ -43,8 +43,8 @@ def milk_hand_turned():
 
 
 def test_twelve_hand_turned_views_make_a_model_within_2mm(milk_hand_turned, tmp_path):
+    from bench.synthetic import oracle_poses
     from services.registration.dynamic.model import DynamicConfig, build_model, fuse, sequential_map
-    from services.registration.dynamic.synthetic import oracle_poses
     from services.registration.evaluation import evaluate_model
 
     views, T0 = milk_hand_turned
@@ -89,8 +89,8 @@ def test_twelve_hand_turned_views_make_a_model_within_2mm(milk_hand_turned, tmp_
 @pytest.mark.parametrize("obj,profile", [("tomato_sauce", "hand-turned"), ("milk", "robot-turned")])
 def test_harder_cases_stay_near_the_noise_floor(obj, profile):
     """A rotationally symmetric can (yaw only from texture) and the robot's large turn errors."""
+    from bench.synthetic import oracle_poses
     from services.registration.dynamic.model import DynamicConfig, build_model, fuse
-    from services.registration.dynamic.synthetic import oracle_poses
     from services.registration.evaluation import evaluate_model
 
     views, T0 = _sim_views(obj, profile, seed=5)

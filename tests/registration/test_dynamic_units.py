@@ -52,7 +52,7 @@ def _view(xyz, turn=0.0, center=(0.36, 0.0, 0.08), index=0, rgb=None):
 def milk_scan():
     """12 virtually scanned views of the HOPE milk carton, hand-turned (ground truth attached)."""
     shared_data("hope", "milk")
-    from services.registration.dynamic.synthetic import synthetic_views
+    from bench.synthetic import synthetic_views
 
     return synthetic_views("milk", profile="hand-turned", seed=3)
 

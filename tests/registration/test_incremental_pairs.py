@@ -22,7 +22,7 @@ CONFIG = DynamicConfig(configuration="no_region", preprocess=PreprocessConfig(pa
 @pytest.fixture(scope="module")
 def views():
     shared_data("hope", "milk")
-    from services.registration.dynamic.synthetic import synthetic_views
+    from bench.synthetic import synthetic_views
 
     return synthetic_views("milk", profile="hand-turned", seed=3, voxel=0.002).views
 
@@ -30,7 +30,7 @@ def views():
 @pytest.fixture(scope="module")
 def views_1mm():
     shared_data("hope", "milk")
-    from services.registration.dynamic.synthetic import synthetic_views
+    from bench.synthetic import synthetic_views
 
     return synthetic_views("milk", profile="hand-turned", seed=3).views
 

@@ -17,9 +17,9 @@ from tests.registration.workers import launch_two_workers, worker_computing_a_pa
 
 def _job():
     shared_data("hope", "milk")
+    from bench.synthetic import synthetic_views
     from services.registration.dynamic.model import DynamicConfig, early_pair_job
     from services.registration.dynamic.preprocess import PreprocessConfig
-    from services.registration.dynamic.synthetic import synthetic_views
 
     views = synthetic_views("milk", views=12, profile="hand-turned", seed=3, voxel=0.003).views
     cfg = DynamicConfig(configuration="no_region", preprocess=PreprocessConfig(palette_views=2))

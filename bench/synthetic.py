@@ -24,7 +24,7 @@ from common.geometry import invert, look_at, make_transform, rotation_about_axis
 from common.messages import Plane
 from services.registration.dynamic.views import DynamicRegistrationError, DynamicView
 
-HOPE_DIR = Path(__file__).resolve().parents[3] / ".." / "shared" / "data" / "hope"
+HOPE_DIR = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "hope"
 OBJECT_POSITION = np.array([0.36, 0.0, 0.0])
 TABLE_CUT_M = 0.004  # the static stage removes points within a few mm of the table plane
 
