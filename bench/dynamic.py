@@ -208,12 +208,12 @@ def _table(per_object: dict[str, dict], rows: tuple[str, ...]) -> dict:
 
 def run(quick: bool = False) -> dict:
     """Measure; returns one JSON-able dict (per profile: table, per-object figures, targets)."""
-    from bench.synthetic import hope_objects
+    from services.sim.catalogue import hope_names
 
     sessions = [p.strip() for p in os.environ.get("OBJSCAN_BENCH_SESSIONS", "").split(",") if p.strip()]
     if sessions:
         return {"physics_sessions": [measure_session(p) for p in sessions]}
-    objects = ["milk"] if quick else hope_objects()
+    objects = ["milk"] if quick else hope_names()
     profiles = ["realistic"] if quick else ["realistic", "hand-turned", "robot-turned"]
     rows = ("no_region", "pose_graph", "auto", "oracle") if quick else ROWS
     result: dict = {"quick": quick, "objects": objects, "rows": list(rows), "profiles": {}}

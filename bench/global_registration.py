@@ -58,9 +58,10 @@ def _random_motion(rng: np.random.Generator, centre: np.ndarray) -> np.ndarray:
 
 
 def hope_cases(objects: list[str], pairs: list[int], seed: int = 0) -> list[Case]:
-    from bench.synthetic import hope_objects, synthetic_views
+    from bench.synthetic import synthetic_views
+    from services.sim.catalogue import hope_names
 
-    available = set(hope_objects())
+    available = set(hope_names())
     rng = np.random.default_rng(seed)
     cases: list[Case] = []
     for obj in objects:

@@ -1,134 +1,39 @@
-"""Simulated dynamic-stage input: 12 isolated views of a HOPE object, virtually scanned.
+"""Simulated dynamic-stage input: 12 isolated views of a HOPE object, virtually scanned (tests, benchmarks).
 
 A stand-in for ``services/sim/scenario.py`` + the static stage, so the dynamic pipeline can be tested
-and benchmarked on its own. It places the textured HOPE mesh on the table as the conventions say
-(footprint centre at (0.36, 0, 0), z up), turns it 30° per view with the profile's turn errors and
-placement slide, ray-casts three D435-like scans per view from the robot side (depth noise growing with
-range, 1 mm depth quantisation, texture colors with a per-view exposure change), drops points near the
-table as the static stage's plane removal does, fuses the scans at 1 mm and estimates normals and a
-(deliberately naive, visible-side-biased) object centre. Ground truth (true object pose per view and
-the mesh) rides along for evaluation only.
+and benchmarked on its own. It uses the twin's notions: the HOPE object as ``services/sim/catalogue.py``
+loads it (footprint centre at (0.36, 0, 0), z up, its texture sampled as the twin does), the twin's error
+profile for the turns and set-down shifts (``services/sim/profiles.py``: the draws of ``World.turn_object``;
+each shift is about the nominal spot here, where the twin accumulates them)
+and the D435 colour model (``common.messages.d435_intrinsics``). It ray-casts three scans per view from the
+robot side (depth noise growing with range, 1 mm depth quantisation, a per-view exposure change), drops
+points near the table as the static stage's plane removal does, fuses the scans at 1 mm and estimates
+normals and a (deliberately naive, visible-side-biased) object centre. Ground truth (true object pose per
+view and the object) rides along for evaluation only.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 import open3d as o3d
-from PIL import Image
 
 from common.geometry import invert, look_at, make_transform, rotation_about_axis
-from common.messages import Plane
+from common.messages import Plane, d435_intrinsics
 from services.registration.dynamic.views import DynamicRegistrationError, DynamicView
+from services.sim.catalogue import SimObject, load_object
+from services.sim.errors import SimError
+from services.sim.profiles import get_profile
 
-HOPE_DIR = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "hope"
 OBJECT_POSITION = np.array([0.36, 0.0, 0.0])
 TABLE_CUT_M = 0.004  # the static stage removes points within a few mm of the table plane
 
 
-@dataclass(frozen=True)
-class TurnProfile:
-    """How the object is actually turned between views (errors the registration must absorb)."""
-
-    turn_error_low_deg: float
-    turn_error_high_deg: float
-    slide_sigma_m: float
-
-
-PROFILES = {
-    # a person turns it: close to 30°, placed back nearly in place
-    "hand-turned": TurnProfile(-5.0, 5.0, 0.002),
-    # the gripper turns it: the paper saw systematic over-turning and slips (41.5° average for 30°)
-    "robot-turned": TurnProfile(-5.0, 15.0, 0.005),
-}
-
-
-def _parse_obj(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(vertices, triangles, per-corner uvs) of a triangulated OBJ, read directly.
-
-    Read by hand because open3d's reader re-orders texture coordinates on these files (sampled
-    colors came out wrong); the format is simple: ``v``, ``vt`` and ``f v/vt[/vn]`` lines.
-    """
-    verts, tex, faces, face_uv = [], [], [], []
-    with open(path) as fh:
-        for line in fh:
-            if line.startswith("v "):
-                verts.append([float(x) for x in line.split()[1:4]])
-            elif line.startswith("vt "):
-                tex.append([float(x) for x in line.split()[1:3]])
-            elif line.startswith("f "):
-                corners = [c.split("/") for c in line.split()[1:]]
-                for a, b in ((1, 2), (2, 3)) if len(corners) == 4 else ((1, 2),):
-                    tri = (corners[0], corners[a], corners[b])
-                    faces.append([int(c[0]) - 1 for c in tri])
-                    face_uv.append([int(c[1]) - 1 if len(c) > 1 and c[1] else -1 for c in tri])
-    v = np.asarray(verts, dtype=np.float64)
-    t = np.asarray(tex, dtype=np.float64) if tex else np.zeros((1, 2))
-    fuv = np.asarray(face_uv)
-    uvs = np.where(fuv[..., None] >= 0, t[np.clip(fuv, 0, None)], 0.0)
-    return v, np.asarray(faces, dtype=np.int32), uvs
-
-
-@dataclass
-class TexturedMesh:
-    """A HOPE mesh in the ``object`` frame: metres, z up, footprint centre at the origin."""
-
-    name: str
-    vertices: np.ndarray  # (V, 3) float64
-    triangles: np.ndarray  # (T, 3) int32
-    triangle_uvs: np.ndarray  # (T, 3, 2) float64
-    texture: np.ndarray  # (H, W, 3) uint8
-
-    def o3d_mesh(self) -> o3d.geometry.TriangleMesh:
-        m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(self.vertices),
-                                      o3d.utility.Vector3iVector(self.triangles))
-        m.compute_vertex_normals()
-        return m
-
-    def sample_surface(self, n: int, seed: int = 0, min_z: float = TABLE_CUT_M) -> np.ndarray:
-        """Uniform surface samples (object frame), without the footprint no camera can see."""
-        pcd = self.o3d_mesh().sample_points_uniformly(number_of_points=int(n * 1.3), seed=seed) \
-            if _has_seed_arg() else self.o3d_mesh().sample_points_uniformly(number_of_points=int(n * 1.3))
-        pts = np.asarray(pcd.points)
-        return pts[pts[:, 2] > min_z][:n]
-
-
-@lru_cache(maxsize=1)
-def _has_seed_arg() -> bool:
-    import inspect
-
-    try:
-        return "seed" in inspect.signature(o3d.geometry.TriangleMesh.sample_points_uniformly).parameters
-    except (TypeError, ValueError):
-        return False
-
-
-def hope_objects() -> list[str]:
-    """Names of the HOPE objects present in shared/data (empty if the data is absent)."""
-    if not HOPE_DIR.is_dir():
-        return []
-    return sorted(p.name for p in HOPE_DIR.iterdir() if p.is_dir() and list(p.glob("*.obj")))
-
-
-@lru_cache(maxsize=8)
-def load_hope_mesh(name: str) -> TexturedMesh:
-    """Load ``shared/data/hope/<name>``: centimetres -> metres, y up -> z up, bottom at z = 0."""
-    folder = HOPE_DIR / name
-    objs = sorted(folder.glob("*.obj")) if folder.is_dir() else []
-    if not objs:
-        raise DynamicRegistrationError(f"HOPE mesh {name!r} not found", code="no_data",
-                                       detail={"path": str(folder)})
-    v, tri, uvs = _parse_obj(objs[0])
-    v = v * 0.01
-    v = np.column_stack([v[:, 0], -v[:, 2], v[:, 1]])  # +90° about x: y (long axis) becomes z
-    lo, hi = v.min(0), v.max(0)
-    v -= np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])
-    pngs = sorted(folder.glob("*.png"))
-    tex = np.asarray(Image.open(pngs[0]).convert("RGB")) if pngs else np.full((2, 2, 3), 180, np.uint8)
-    return TexturedMesh(name, v, tri, uvs, tex)
+def surface_samples(obj: SimObject, n: int, seed: int = 0, min_z: float = TABLE_CUT_M) -> np.ndarray:
+    """Uniform surface samples (object frame), without the footprint no camera can see."""
+    pts = obj.gt_points(int(n * 1.3), seed=seed)
+    return pts[pts[:, 2] > min_z][:n]
 
 
 def scan_camera_poses(distance: float = 0.36, heights: tuple[float, ...] = (0.22, 0.30, 0.22),
@@ -143,14 +48,15 @@ def scan_camera_poses(distance: float = 0.36, heights: tuple[float, ...] = (0.22
     return poses
 
 
-def raycast_scan(mesh: TexturedMesh, T_base_object: np.ndarray, T_base_camera: np.ndarray,
-                 rng: np.random.Generator, width: int = 640, height: int = 480, fx: float = 615.0,
+def raycast_scan(mesh: SimObject, T_base_object: np.ndarray, T_base_camera: np.ndarray,
+                 rng: np.random.Generator, width: int = 640, height: int = 480,
                  exposure: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """One D435-like depth+color scan of the mesh, back-projected to ``base``: (xyz, rgb)."""
+    """One D435-like depth+color scan of the object, back-projected to ``base``: (xyz, rgb)."""
     verts = mesh.vertices @ T_base_object[:3, :3].T + T_base_object[:3, 3]
     T_cam_base = invert(T_base_camera)
     vc = verts @ T_cam_base[:3, :3].T + T_cam_base[:3, 3]
-    cx, cy = width / 2.0, height / 2.0
+    K = d435_intrinsics(width, height)
+    fx, cx, cy = K.fx, K.cx, K.cy
     uv = vc[:, :2] / vc[:, 2:3] * fx + [cx, cy]
     u0, v0 = np.clip(np.floor(uv.min(0)).astype(int) - 2, 0, [width - 1, height - 1])
     u1, v1 = np.clip(np.ceil(uv.max(0)).astype(int) + 2, 0, [width - 1, height - 1])
@@ -172,14 +78,8 @@ def raycast_scan(mesh: TexturedMesh, T_base_object: np.ndarray, T_base_camera: n
     pts_cam = dirs_cam[ok] * depth[:, None]
     xyz = pts_cam @ T_base_camera[:3, :3].T + T_base_camera[:3, 3]
     prim = hit["primitive_ids"].numpy()[ok].astype(np.int64)
-    bary = hit["primitive_uvs"].numpy()[ok].astype(np.float64)
-    tuv = mesh.triangle_uvs[prim]
-    w = np.column_stack([1.0 - bary.sum(1), bary[:, 0], bary[:, 1]])
-    tex_uv = (tuv * w[:, :, None]).sum(1)
-    H, W = mesh.texture.shape[:2]
-    px = np.clip((tex_uv[:, 0] % 1.0) * W, 0, W - 1).astype(int)
-    py = np.clip((1.0 - tex_uv[:, 1] % 1.0) * H, 0, H - 1).astype(int)
-    rgb = np.clip(mesh.texture[py, px].astype(np.float64) * exposure + rng.normal(0, 2.0, (len(px), 3)),
+    albedo = mesh.surface_colors(prim, hit["primitive_uvs"].numpy()[ok])
+    rgb = np.clip(albedo.astype(np.float64) * exposure + rng.normal(0, 2.0, (len(prim), 3)),
                   0, 255).astype(np.uint8)
     return xyz, rgb
 
@@ -191,12 +91,12 @@ class SyntheticScan:
     object_name: str
     profile: str
     views: list[DynamicView]
-    mesh: TexturedMesh
+    mesh: SimObject
     T_base_object_true: list[np.ndarray]
 
     def gt_points_view0(self, n: int = 100_000, seed: int = 0) -> np.ndarray:
         """Ground-truth surface samples placed where the object stood in view 0 (``base``)."""
-        pts = self.mesh.sample_surface(n, seed=seed)
+        pts = surface_samples(self.mesh, n, seed=seed)
         T = self.T_base_object_true[0]
         return pts @ T[:3, :3].T + T[:3, 3]
 
@@ -209,25 +109,29 @@ def synthetic_views(object_name: str, views: int = 12, scans_per_view: int = 3,
     a table plane z = 0 and a naive centre estimate (centroid of the visible side), like the static
     stage's output; plus the true object pose per view.
     """
-    if profile not in PROFILES:
-        raise DynamicRegistrationError(f"unknown profile {profile!r}", code="bad_value",
-                                       detail={"profiles": sorted(PROFILES)})
-    prof = PROFILES[profile]
+    try:
+        prof = get_profile(profile)
+        mesh = load_object(object_name)
+    except SimError as exc:  # an unknown profile or object
+        raise DynamicRegistrationError(exc.message, code="bad_value", detail=exc.detail) from None
     rng = np.random.default_rng(seed)
-    mesh = load_hope_mesh(object_name)
+    gain = prof.draw_turn_gain(rng)
     cams = scan_camera_poses()[:scans_per_view] if scans_per_view <= 3 else scan_camera_poses(
         heights=tuple(np.linspace(0.2, 0.32, scans_per_view)),
         azimuths_deg=tuple(np.linspace(-30, 30, scans_per_view)))
     step = 360.0 / views
     yaw_true = 0.0
+    position = OBJECT_POSITION.copy()
     table = Plane(normal=np.array([0.0, 0.0, 1.0]), offset=0.0, center=OBJECT_POSITION.copy())
     out_views: list[DynamicView] = []
     poses: list[np.ndarray] = []
     for k in range(views):
-        if k > 0:
-            yaw_true += step + rng.uniform(prof.turn_error_low_deg, prof.turn_error_high_deg)
-        slide = np.r_[rng.normal(0.0, prof.slide_sigma_m, 2), 0.0] if k > 0 else np.zeros(3)
-        T_bo = make_transform(rotation_about_axis([0, 0, 1], np.radians(yaw_true)), OBJECT_POSITION + slide)
+        if k > 0:  # the twin's set-down draw (World.turn_object): achieved turn, footprint shift
+            achieved, shift, _ = prof.draw_set_down(step, gain, rng)
+            yaw_true += achieved
+            # put back on its mark: the shift is about the nominal spot, not accumulated as on the twin's table
+            position[:2] = OBJECT_POSITION[:2] + shift
+        T_bo = make_transform(rotation_about_axis([0, 0, 1], np.radians(yaw_true)), position.copy())
         poses.append(T_bo)
         exposure = float(rng.uniform(0.92, 1.08))
         parts = [raycast_scan(mesh, T_bo, cam, rng, exposure=exposure) for cam in cams]

@@ -69,10 +69,10 @@ def _six_dof(job, scorer):
 
 
 def run(quick: bool = False) -> dict[str, Any]:
-    from bench.synthetic import hope_objects
     from services.registration.dynamic.pair import _evaluation_clouds, _turn_stage
+    from services.sim.catalogue import hope_names
 
-    objects = ["milk", "orange_juice"] if quick else hope_objects()
+    objects = ["milk", "orange_juice"] if quick else hope_names()
     turns = TURNS[:2] if quick else TURNS
     rows = []
     for obj in objects:
