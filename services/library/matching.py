@@ -23,7 +23,7 @@ Two stages, as the issue asks (the paper's stated next step toward recognising o
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -250,3 +250,7 @@ def register_and_score(query: _Prepared, model: _Prepared, cfg: FindConfig) -> d
     assert best is not None
     return {k: (round(v, 5) if isinstance(v, float) else v) for k, v in best.items()} | {
         "starts": cfg.ransac_trials + (cfg.yaw_steps if cfg.upright else 0)}
+
+
+def config_dict(cfg: FindConfig) -> dict[str, Any]:
+    return asdict(cfg)
