@@ -25,7 +25,6 @@ from services.registration.dynamic.configurations import (
     consistency_score,
 )
 from services.registration.dynamic.pair import PairConfig, PairJob, PairResult, crop_to_overlap, register_pair
-from services.registration.dynamic.pose_graph import optimise_pose_graph
 from services.registration.dynamic.preprocess import (
     Cloud,
     fit_palette,
@@ -34,6 +33,7 @@ from services.registration.dynamic.preprocess import (
     prerotation,
     quantize,
 )
+from services.registration.dynamic.view_graph import optimise_pose_graph
 from services.registration.dynamic.views import DynamicRegistrationError, DynamicView, validate_views
 from tests.conftest import shared_data
 

@@ -36,7 +36,6 @@ from services.registration.dynamic.configurations import (
     consistency_score,
 )
 from services.registration.dynamic.pair import PairConfig, PairJob, PairResult, job_fingerprint, register_pair
-from services.registration.dynamic.pose_graph import optimise_pose_graph
 from services.registration.dynamic.preprocess import (
     Cloud,
     Prepared,
@@ -49,6 +48,7 @@ from services.registration.dynamic.preprocess import (
     scan_palette,
     stacking_frame,
 )
+from services.registration.dynamic.view_graph import optimise_pose_graph
 from services.registration.dynamic.views import DynamicRegistrationError, DynamicView
 
 MapPairs = Callable[[list[PairJob]], list[PairResult]]
