@@ -6,7 +6,7 @@ camera poses off by 1-3 mm / 0.3-1 deg per scan plus a 3 mm / 0.5 deg hand-eye e
 ``default`` profile is also run on the old ``robot-turned`` twin (``baseline``), in the same run.
 For each profile and view: wall time and CPU time of ``register_view`` (rendering excluded) and the
 error of each recovered scan pose relative to scan 0 against ground truth (see
-``services/registration/static/evaluate.py`` for why relative).
+``services/registration/static/pose_errors.py`` for why relative).
 
 JSON: ``{"default": {"s_per_view", "max_trans_err_mm", "max_rot_err_deg", "global_fallback_fraction", ...},
 "paper": {same}, "baseline": {same, on BASELINE_PROFILE},
@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from services.registration.static import StaticConfig, StaticRegistrationError, register_view
-from services.registration.static.evaluate import prior_pose_errors, relative_pose_errors
+from services.registration.static.pose_errors import prior_pose_errors, relative_pose_errors
 
 TARGET_S_PER_VIEW = 1.0
 TARGET_FALLBACK_FRACTION = 0.10  # scans that need the global path

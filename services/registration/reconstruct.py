@@ -25,7 +25,7 @@ from common.session_folder import atomic_write_json, read_scan, read_session
 from services.registration.cloud import write_ply
 from services.registration.dynamic.pair import register_pair
 from services.registration.static import StaticConfig, ViewResult, register_view
-from services.registration.static.evaluate import prior_pose_errors, relative_pose_errors
+from services.registration.static.pose_errors import prior_pose_errors, relative_pose_errors
 
 if TYPE_CHECKING:
     from services.registration.dynamic.model import MapPairs
