@@ -22,7 +22,7 @@ from PIL import Image, ImageDraw
 from common.session_folder import atomic_write_bytes, read_scan_dir
 from services.report.errors import ReportError
 from services.report.graph import registration_graph_svg, timings_svg
-from services.report.raster import Camera, colormap, orbit_camera, png_data_uri, render_points
+from services.report.raster import RasterCamera, colormap, orbit_camera, png_data_uri, render_points
 from services.report.session_data import SessionData, ViewData, ground_truth_points, load_session
 from services.report.viewer import CSS as VIEWER_CSS
 from services.report.viewer import MAX_POINTS as VIEWER_POINTS
@@ -274,7 +274,7 @@ def _grasp_tables(v: ViewData, chosen_mode: str | None, chosen_idx: int | None) 
 
 def _object_from_camera(v: ViewData, frame, grasp: dict[str, Any] | None) -> Image.Image:  # noqa: ANN001
     intr = frame.intrinsics
-    cam = Camera(np.asarray(frame.T_base_camera, float), intr.fx, intr.fy, intr.cx, intr.cy, intr.width,
+    cam = RasterCamera(np.asarray(frame.T_base_camera, float), intr.fx, intr.fy, intr.cx, intr.cy, intr.width,
                  intr.height)
     cloud = v.object_cloud
     img = Image.fromarray(render_points(cloud.xyz, cloud.rgb, cam, normals=cloud.normals, radius_px=2,
@@ -291,7 +291,7 @@ def _object_from_camera(v: ViewData, frame, grasp: dict[str, Any] | None) -> Ima
     return _crop_to(img, cam, np.asarray(cloud.xyz, float), margin=0.3)
 
 
-def _crop_to(img: Image.Image, cam: Camera, xyz: np.ndarray, margin: float) -> Image.Image:
+def _crop_to(img: Image.Image, cam: RasterCamera, xyz: np.ndarray, margin: float) -> Image.Image:
     """Crop ``img`` to the projected bounds of ``xyz`` plus ``margin`` (the object is small in a full frame)."""
     T_cw = np.linalg.inv(cam.T_world_camera)
     pc = xyz @ T_cw[:3, :3].T + T_cw[:3, 3]

@@ -24,8 +24,9 @@ _VIRIDIS = np.array([[68, 1, 84], [71, 44, 122], [59, 81, 139], [44, 113, 142], 
 
 
 @dataclass(frozen=True)
-class Camera:
-    """A pinhole camera: ``T_world_camera`` (optical frame: z forward, x right, y down) and intrinsics."""
+class RasterCamera:
+    """The report's pinhole camera for rasterising points (not a ``services.camera`` backend):
+    ``T_world_camera`` (optical frame: z forward, x right, y down) and intrinsics."""
 
     T_world_camera: np.ndarray
     fx: float
@@ -46,7 +47,7 @@ def colormap(values: np.ndarray, vmin: float, vmax: float) -> np.ndarray:
 
 
 def orbit_camera(center: np.ndarray, radius: float, azimuth_deg: float, elevation_deg: float,
-                 width: int = 480, height: int = 360, fill: float = 0.8) -> Camera:
+                 width: int = 480, height: int = 360, fill: float = 0.8) -> RasterCamera:
     """A camera on a sphere around ``center`` (z up) looking at it, zoomed so a ball of ``radius`` fills
     ``fill`` of the shorter image side."""
     if radius <= 0 or not np.isfinite(radius):
@@ -59,10 +60,10 @@ def orbit_camera(center: np.ndarray, radius: float, azimuth_deg: float, elevatio
     if T[2, 1] > 0:  # keep world-up pointing up in the image
         T[:3, :2] = -T[:3, :2]
     f = fill * 0.5 * min(width, height) * distance / radius
-    return Camera(T, f, f, width / 2.0, height / 2.0, width, height)
+    return RasterCamera(T, f, f, width / 2.0, height / 2.0, width, height)
 
 
-def render_points(xyz: np.ndarray, rgb: np.ndarray | None, camera: Camera, *, normals: np.ndarray | None = None,
+def render_points(xyz: np.ndarray, rgb: np.ndarray | None, camera: RasterCamera, *, normals: np.ndarray | None = None,
                   radius_px: int = 1, background: tuple[int, int, int] = (255, 255, 255)) -> np.ndarray:
     """(H, W, 3) uint8 image of the points seen by ``camera``; each point a disk of ``radius_px``.
 

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from services.report import Camera, ReportError, colormap, orbit_camera, render_points
+from services.report import RasterCamera, ReportError, colormap, orbit_camera, render_points
 
 WHITE = (255, 255, 255)
 
 
-def camera_at_origin(w: int = 64, h: int = 48) -> Camera:
-    return Camera(np.eye(4), 50.0, 50.0, w / 2.0, h / 2.0, w, h)
+def camera_at_origin(w: int = 64, h: int = 48) -> RasterCamera:
+    return RasterCamera(np.eye(4), 50.0, 50.0, w / 2.0, h / 2.0, w, h)
 
 
 def test_point_lands_on_its_pinhole_pixel():

@@ -1,6 +1,6 @@
 """Top level of the dynamic stage: 12 isolated views in, one colored model out.
 
-``build_model(views, config, map_pairs=None, progress=None) -> ModelResult``
+``build_model(views, config, map_pairs=None, progress=None) -> RegisteredModel``
 
 1. pre-process (pre-rotate by the commanded turn, stack on the centres, quantise colors; regions
    when a configuration needs them),
@@ -79,7 +79,7 @@ class DynamicConfig:
 
 
 @dataclass
-class ModelResult:
+class RegisteredModel:
     """The model and everything needed to judge it without ground truth.
 
     ``xyz``/``rgb``/``normals`` are in the ``base`` coordinates of view 0. ``T_model_view[k]`` maps
@@ -279,7 +279,7 @@ def fuse(views: list[DynamicView], T_model_view: list[np.ndarray], voxel: float)
 
 def build_model(views: list[DynamicView], config: DynamicConfig | None = None,
                 map_pairs: MapPairs | None = None, progress: Progress | None = None,
-                reuse: dict[str, PairResult] | None = None) -> ModelResult:
+                reuse: dict[str, PairResult] | None = None) -> RegisteredModel:
     """Register the views into one colored model; see the module doc.
 
     ``reuse`` (job fingerprint -> result): pair results computed earlier, e.g. during the acquisition;
@@ -313,7 +313,7 @@ def build_model(views: list[DynamicView], config: DynamicConfig | None = None,
                "fuse_s": time.perf_counter() - t_fuse, "total_s": time.perf_counter() - t0,
                "pairs": pair_stats}
     say("done", {"configuration": chosen.name, "seconds": timings["total_s"]})
-    return ModelResult(model.xyz, model.rgb, model.normals, T_model_view, chosen.results, chosen.loop,
+    return RegisteredModel(model.xyz, model.rgb, model.normals, T_model_view, chosen.results, chosen.loop,
                        chosen.consistency, chosen.name, reason, chosen.combined.method,
                        chosen.combined.dropped_edge, {o.name: o.summary() for o in outcomes}, timings,
                        cfg.model_voxel)
