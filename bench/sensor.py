@@ -5,7 +5,7 @@ depth in mm); the GraspNet D435 frame (1280x720) is measured too and reported be
 Twin: the HOPE objects on the twin's table, seen from 0.7-0.9 m at 40-55 deg elevation like the real
 frames, rendered once without noise; each sensor model under test degrades the same perfect frames.
 
-Every frame, real or twin, is measured by the same functions (``services/sim/sensor_metrics.py``):
+Every frame, real or twin, is measured by the same functions (``bench/sensor_metrics.py``):
 table-plane residual (normalised to 1 m), edge dropouts and flying pixels per edge pixel, interior holes.
 ``fit_noise`` fits ``D435Noise`` to the real medians (subpixel noise, edge dropout and flying-pixel
 chances, random dropouts; stereo occlusion on) and the result is compared with ``D435Noise.calibrated()``,
@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from services.sim.sensor_metrics import FIGURES, DepthFigures, measure_depth, summarise
+from bench.sensor_metrics import FIGURES, DepthFigures, measure_depth, summarise
 
 TOLERANCE = 0.25
 PLOT = Path(__file__).resolve().parent.parent / "docs" / "images" / "sensor_calibration.png"

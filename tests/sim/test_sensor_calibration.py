@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bench.sensor_metrics import edge_figures, measure_depth, table_plane_sigma
 from common.messages import d435_intrinsics
-from services.sim.sensor_metrics import edge_figures, measure_depth, table_plane_sigma
 from services.sim.sensor_model import D435Noise, apply_d435_noise, occluded
 
 K = d435_intrinsics()  # 640x480, fx = fy = 615
@@ -84,7 +84,7 @@ def test_calibrated_twin_matches_the_real_frames_within_25_percent():
     """The benchmark's own check: every figure of the calibrated twin within 25 % of the real frames'
     median, on all 5 HOPE objects (the edge figures depend on the objects' heights: 2 are not enough)."""
     from bench.sensor import FIGURES, _real_dir, measure_twin, real_frames, twin_scenes
-    from services.sim.sensor_metrics import summarise
+    from bench.sensor_metrics import summarise
 
     if not (_real_dir() / "tabletop_uoc").is_dir():
         pytest.skip("real RealSense frames not found")
