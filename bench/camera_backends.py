@@ -73,8 +73,8 @@ def _sim_figures(n: int, workdir: Path) -> dict[str, Any]:
 
 
 def _realsense_figures(n: int, workdir: Path) -> dict[str, Any]:
+    from bench.software_d435 import SoftwareD435, SoftwareD435Spec, record_db3
     from services.camera.realsense import RealSenseCamera, RealSenseCameraConfig
-    from services.camera.realsense.software import SoftwareD435, SoftwareD435Spec, record_db3
 
     spec = SoftwareD435Spec()
     di, ci = spec.depth_intrinsics, spec.color_intrinsics

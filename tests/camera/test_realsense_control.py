@@ -1,6 +1,6 @@
 """Camera control on the software D435: exposure and white balance settled then locked across views and
 recorded in meta, the visual preset applied, reconnect with hardware_reset after repeated timeouts, serial
-selection. The software device emulates auto exposure that drifts frame to frame (software.py)."""
+selection. The software device emulates auto exposure that drifts frame to frame (bench/software_d435.py)."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import time
 import numpy as np
 import pytest
 
+from bench.software_d435 import SoftwareD435, SoftwareD435Spec
 from services.camera.errors import CameraConfigError, CaptureTimeout, NoDeviceError
 from services.camera.realsense import RealSenseCamera, RealSenseCameraConfig
 from services.camera.realsense.camera import _rs, choose_serial
-from services.camera.realsense.software import SoftwareD435, SoftwareD435Spec
 
 pytestmark = pytest.mark.timeout(120)
 

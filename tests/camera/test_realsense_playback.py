@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bench.software_d435 import SoftwareD435Spec, record_db3
 from services.camera.errors import CameraError, EndOfReplay, ReplayDataError
 from services.camera.intrinsics import d435_color_intrinsics, d435_depth_intrinsics, d435_T_color_depth
 from services.camera.realsense import RealSenseCamera, RealSenseCameraConfig
-from services.camera.realsense.software import SoftwareD435Spec, record_db3
 from tests.camera.scene import BOX_COLOR, BOX_Z, render, to_units
 
 pytestmark = pytest.mark.timeout(120)

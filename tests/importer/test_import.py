@@ -110,7 +110,7 @@ def test_a_sequence_without_a_table_is_a_clear_error(tmp_path):
 def test_a_realsense_recording_is_read_frame_by_frame(tmp_path):
     """A .db3 recorded from the software D435: every frame, in order, with the recording's intrinsics."""
     pytest.importorskip("pyrealsense2")
-    from services.camera.realsense.software import record_db3
+    from bench.software_d435 import record_db3
     from tests.camera.test_realsense_playback import SPEC, _frames
 
     path = record_db3(tmp_path / "turntable.db3", _frames(), SPEC)

@@ -3,7 +3,7 @@
 One code path serves three sources, so the tests exercise what runs on the robot:
 - a live camera found over USB (optionally by serial number);
 - a ``.db3`` recording played back non-real-time (``config.playback_file``);
-- an injected ``rs.device``, e.g. the software D435 of ``software.py`` (pyrealsense2's ``software_device``
+- an injected ``rs.device``, e.g. the software D435 of ``bench/software_d435.py`` (pyrealsense2's ``software_device``
   handed to the pipeline with ``pipeline.set_device``; ``software_device.add_to(context)`` does not make it
   visible to ``query_devices`` in pyrealsense2 2.59, so the context route is not used).
 
