@@ -23,6 +23,7 @@ from services.registration.static import (
     StaticRegistrationError,
     register_view,
 )
+from services.registration.static.pose_errors import relative_pose_errors
 
 sim_world = pytest.importorskip("services.sim.world", reason="the digital twin (services/sim) is not available")
 from common.messages import d435_intrinsics  # noqa: E402
@@ -59,16 +60,6 @@ def labelled_view(name: str, *, profile: str = "robot-turned", seed: int = 0, tu
     return frames, labels, T_obj
 
 
-def relative_errors(result, frames):
-    """(mm, deg) of T_c0_cj estimated vs true, for scans 1..n."""
-    T0e, T0t = result.scans[0].T_base_camera, frames[0].T_base_camera_true
-    out = []
-    for s, f in zip(result.scans[1:], frames[1:], strict=True):
-        dt, dr = transform_error(invert(T0e) @ s.T_base_camera, invert(T0t) @ f.T_base_camera_true)
-        out.append((dt * 1e3, dr))
-    return out
-
-
 CASES = [("milk", 0, 0), ("tomato_sauce", 1, 0), ("cream_cheese", 2, 1), ("orange_juice", 3, 2)]
 
 
@@ -88,7 +79,7 @@ def test_default_recovers_scan_poses_within_1mm_02deg(registered):
         )
         for f in frames[1:]
     ]
-    for (dt_mm, dr_deg), (bt, br) in zip(relative_errors(result, frames), believed, strict=True):
+    for (dt_mm, dr_deg), (bt, br) in zip(relative_pose_errors(result, frames), believed, strict=True):
         assert dt_mm <= 1.0 and dr_deg <= 0.2, f"{name}: {dt_mm:.3f} mm {dr_deg:.3f} deg"
         # and the registration actually improved on the arm's prior
         assert dt_mm < bt * 1e3 or dr_deg < br
@@ -161,7 +152,7 @@ def test_global_fallback_when_the_arm_pose_is_badly_wrong():
     frames[1].T_base_camera = frames[1].T_base_camera @ bump  # scan 1's believed pose is 5 cm / 8 degrees off
     result = register_view(frames, StaticConfig())
     assert result.scans[1].path == "global"
-    (dt1, dr1), (dt2, dr2) = relative_errors(result, frames)
+    (dt1, dr1), (dt2, dr2) = relative_pose_errors(result, frames)
     assert dt1 <= 1.0 and dr1 <= 0.2, (dt1, dr1)
     assert dt2 <= 1.0 and dr2 <= 0.2, (dt2, dr2)
 
