@@ -23,9 +23,24 @@ from common.codec import Message
 from common.errors import ObjscanError
 from common.messages import JointState, RGBDFrame
 from common.runtime import COMMAND_BUDGET, QueryContext, Service, run_service, service_arg_parser, settings_from_args
-from services.calibration.file import calibration_from_env
+from services.calibration.file import HandEyeCalibration, calibration_from_env
 from services.camera.base import LIVE_POSE_SOURCES, POSE_SOURCE_KEY
 from services.camera.registry import BACKENDS, CameraContext, backend_option, camera_from_options
+
+
+def apply_hand_eye(frame: RGBDFrame, hand_eye: HandEyeCalibration | None, path: str | None) -> RGBDFrame:
+    """Correct a live frame's pose with the hand-eye calibration and say so in ``meta["hand_eye"]``.
+
+    Only live poses (``LIVE_POSE_SOURCES``): a replay's were stamped (and corrected) when recorded, and an
+    unknown pose must stay recognisable as the identity. Whatever the backend, this one rule decides.
+    """
+    if hand_eye is None or (frame.meta or {}).get(POSE_SOURCE_KEY) not in LIVE_POSE_SOURCES:
+        return frame
+    frame.T_base_camera = hand_eye.apply(frame.T_base_camera)
+    frame.meta = {**(frame.meta or {}), "hand_eye": {
+        "file": path, "correction": hand_eye.correction.tolist(),
+        "T_gripper_camera": hand_eye.T_gripper_camera.tolist()}}
+    return frame
 
 
 class CameraService(Service):
@@ -56,12 +71,7 @@ class CameraService(Service):
 
     async def capture(self, msg: Message | None, ctx: QueryContext) -> RGBDFrame:
         pose = await self._arm_camera_pose() if self.camera.pose_from_arm else None
-        frame = await self.camera.acapture(pose)
-        if self.hand_eye is not None and frame.meta.get(POSE_SOURCE_KEY) in LIVE_POSE_SOURCES:
-            frame.T_base_camera = self.hand_eye.apply(frame.T_base_camera)
-            frame.meta = {**(frame.meta or {}), "hand_eye": {
-                "file": self.hand_eye_path, "correction": self.hand_eye.correction.tolist(),
-                "T_gripper_camera": self.hand_eye.T_gripper_camera.tolist()}}
+        frame = apply_hand_eye(await self.camera.acapture(pose), self.hand_eye, self.hand_eye_path)
         self.captures += 1
         return frame
 

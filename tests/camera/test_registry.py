@@ -54,3 +54,25 @@ def test_compose_files_start_registry_backends():
             assert backend in (BACKENDS if module == "camera" else ARM_BACKENDS), (path.name, module, backend)
             seen += 1
     assert seen >= 4  # sim and real cells, camera and arm
+
+
+@pytest.mark.parametrize("source,corrected", [("given", True), ("sim", True), ("recorded", False), ("unknown", False)])
+def test_the_service_corrects_live_poses_only(source, corrected):
+    """One rule for every backend (it used to branch on the backend name): a hand-eye calibration corrects
+    a pose given by the arm or stamped by the twin, never a recorded or an unknown one."""
+    import numpy as np
+
+    from common.geometry import make_transform
+    from common.messages import RGBDFrame
+    from services.calibration.file import HandEyeCalibration
+    from services.camera.service import apply_hand_eye
+
+    nominal = make_transform(np.eye(3), [0.04, 0.0, 0.05])
+    cal = HandEyeCalibration(make_transform(np.eye(3), [0.042, 0.0, 0.05]), nominal)
+    T = make_transform(np.eye(3), [0.3, 0.1, 0.4])
+    frame = RGBDFrame(color=np.zeros((4, 4, 3), np.uint8), depth=np.zeros((4, 4), np.uint16), T_base_camera=T.copy(),
+                      meta={"pose_source": source})
+    out = apply_hand_eye(frame, cal, "he.json")
+    assert np.allclose(out.T_base_camera[:3, 3], [0.302, 0.1, 0.4]) == corrected
+    assert ("hand_eye" in out.meta) == corrected
+    assert apply_hand_eye(frame, None, None) is frame  # no calibration: nothing to do
