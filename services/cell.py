@@ -45,6 +45,11 @@ def needs_twin(backend: str | Mapping[str, str]) -> bool:
     return "sim" in cell_backends(backend).values()
 
 
+def hardware_services(backend: str | Mapping[str, str]) -> list[str]:
+    """The processes a cell's hardware needs: its backends' services, after the twin when it is simulated."""
+    return (["sim"] if needs_twin(backend) else []) + list(cell_backends(backend))
+
+
 def cell_specs(services: list[str] | None = None, *, backend: str | Mapping[str, str] = "sim",
                extra_args: dict[str, list[str]] | None = None) -> list[ProcessSpec]:
     """Process specs for the named services (default: all), with the given cell's hardware backends."""

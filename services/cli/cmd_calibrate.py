@@ -21,6 +21,7 @@ from common.messages import Request
 from common.session_folder import atomic_write_json
 from common.zenoh_config import DEFAULT_ROUTER_PORT
 from services.calibration.procedure import ProcedureConfig, run_procedure
+from services.cell import hardware_services
 from services.cli.cells import add_network_args, remote_session
 from services.cli.cmd_scan import console, ensure_cell
 
@@ -56,7 +57,7 @@ def run(args) -> int:  # noqa: ANN001
     t0 = time.time()
     if args.connect:
         try:
-            session = remote_session(args.connect, ["arm", "camera"] + (["sim"] if args.backend == "sim" else []))
+            session = remote_session(args.connect, hardware_services(args.backend))
         except ObjscanError as exc:
             console.print(f"[red]{exc.message}[/red]")
             return 1
@@ -64,8 +65,7 @@ def run(args) -> int:  # noqa: ANN001
             return _calibrate(session, args, cfg, out, t0)
         finally:
             session.close()
-    services = ["sim", "arm", "camera"] if args.backend == "sim" else ["arm", "camera"]
-    with ensure_cell(args.port, args.backend, out.parent / "logs", services=services) as group:
+    with ensure_cell(args.port, args.backend, out.parent / "logs", services=hardware_services(args.backend)) as group:
         return _calibrate(group.session, args, cfg, out, t0)
 
 

@@ -25,7 +25,7 @@ from common.session_folder import atomic_write_bytes, atomic_write_json
 from common.zenoh_config import DEFAULT_ROUTER_PORT
 from services.camera.registry import BACKENDS as CAMERA_BACKENDS
 from services.camera.registry import backend_option
-from services.cell import CELLS, needs_twin
+from services.cell import CELLS, hardware_services
 from services.cli.cells import add_network_args, remote_session
 from services.cli.cmd_scan import console, ensure_cell
 from services.orchestrator.config import AcquisitionConfig
@@ -74,7 +74,7 @@ def run(args) -> int:  # noqa: ANN001
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     backends = CELLS["sim"] if args.backend == "sim" else {"camera": args.backend}
-    services = (["sim"] if needs_twin(backends) else []) + list(backends)
+    services = hardware_services(backends)
     camera = ["--session", args.session] if args.session else []
     camera += [a for key, value in args.option for a in ("--option", f"{key}={value}")]
     extra = {"camera": camera} if camera else None

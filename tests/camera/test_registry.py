@@ -10,7 +10,7 @@ from services.arm.drivers.registry import BACKENDS as ARM_BACKENDS
 from services.camera.base import Camera
 from services.camera.errors import CameraConfigError
 from services.camera.registry import BACKENDS, backend_option, camera_entry, make_camera
-from services.cell import CELLS, cell_specs, needs_twin
+from services.cell import CELLS, cell_specs, hardware_services, needs_twin
 from tests.conftest import REPO
 
 
@@ -44,6 +44,8 @@ def test_cells_name_registry_backends_and_start_them():
     only = cell_specs(["camera"], backend={"camera": "png_folder"}, extra_args={"camera": ["--option", "folder=x"]})
     assert only[0].args == ["--backend", "png_folder", "--option", "folder=x"]
     assert needs_twin("sim") and not needs_twin("real") and not needs_twin({"camera": "replay"})
+    assert hardware_services("sim") == ["sim", "arm", "camera"] and hardware_services("real") == ["arm", "camera"]
+    assert hardware_services({"camera": "png_folder"}) == ["camera"]
 
 
 def test_compose_files_start_registry_backends():
