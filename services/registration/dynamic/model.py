@@ -314,6 +314,6 @@ def build_model(views: list[DynamicView], config: DynamicConfig | None = None,
                "pairs": pair_stats}
     say("done", {"configuration": chosen.name, "seconds": timings["total_s"]})
     return RegisteredModel(model.xyz, model.rgb, model.normals, T_model_view, chosen.results, chosen.loop,
-                       chosen.consistency, chosen.name, reason, chosen.combined.method,
-                       chosen.combined.dropped_edge, {o.name: o.summary() for o in outcomes}, timings,
-                       cfg.model_voxel)
+                           chosen.consistency, chosen.name, reason, chosen.combined.method,
+                           chosen.combined.dropped_edge, {o.name: o.summary() for o in outcomes}, timings,
+                           cfg.model_voxel)
