@@ -22,6 +22,7 @@ import numpy as np
 import open3d as o3d
 from scipy.spatial import cKDTree
 
+from services.registration.blocks import FeatureMatchConfig, fpfh_features, ransac_feature_match
 from services.registration.dynamic.fourpcs import FourPCSConfig, lcp_batch, register_4pcs_overlaps
 from services.registration.dynamic.fourpcs_common import (
     GlobalResult,
@@ -189,22 +190,17 @@ def _translation_only_icp(src: np.ndarray, tgt_tree: cKDTree, T: np.ndarray, max
 
 def _feature_based(src: o3d.geometry.PointCloud, tgt: o3d.geometry.PointCloud, method: str, voxel: float,
                    seed: int, cfg: GlobalRegistrationConfig) -> np.ndarray:
-    feat_param = o3d.geometry.KDTreeSearchParamHybrid(radius=cfg.fpfh_radius_factor * voxel,
-                                                      max_nn=cfg.fpfh_max_nn)
-    f_src = reg.compute_fpfh_feature(src, feat_param)
-    f_tgt = reg.compute_fpfh_feature(tgt, feat_param)
+    features = FeatureMatchConfig(fpfh_radius_factor=cfg.fpfh_radius_factor, fpfh_max_nn=cfg.fpfh_max_nn,
+                                  max_iteration=cfg.ransac_max_iteration, confidence=cfg.ransac_confidence)
+    f_src, f_tgt = fpfh_features(src, voxel, features), fpfh_features(tgt, voxel, features)
     if method == "fgr":
         opt = reg.FastGlobalRegistrationOption(maximum_correspondence_distance=cfg.fgr_distance_factor * voxel,
                                                seed=seed) if _fgr_has_seed() else \
             reg.FastGlobalRegistrationOption(maximum_correspondence_distance=cfg.fgr_distance_factor * voxel)
         out = reg.registration_fgr_based_on_feature_matching(src, tgt, f_src, f_tgt, opt)
         return np.array(out.transformation)
-    dist = cfg.ransac_distance_factor * voxel
-    o3d.utility.random.seed(seed)
-    out = reg.registration_ransac_based_on_feature_matching(
-        src, tgt, f_src, f_tgt, True, dist, reg.TransformationEstimationPointToPoint(False), 3,
-        [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)],
-        reg.RANSACConvergenceCriteria(cfg.ransac_max_iteration, cfg.ransac_confidence))
+    out = ransac_feature_match(src, tgt, f_src, f_tgt, cfg.ransac_distance_factor * voxel, seed=seed,
+                               config=features)
     return np.array(out.transformation)
 
 
