@@ -23,7 +23,7 @@ import open3d as o3d
 from scipy.spatial import cKDTree
 
 from services.registration.blocks import FeatureMatchConfig, fpfh_features, ransac_feature_match
-from services.registration.dynamic.fourpcs import FourPCSConfig, lcp_batch, register_4pcs_overlaps
+from services.registration.dynamic.fourpcs import FourPCSConfig, register_4pcs_overlaps, score_alignment
 from services.registration.dynamic.fourpcs_common import (
     GlobalResult,
     PointCloudInputError,
@@ -143,16 +143,6 @@ def preprocess(cloud: np.ndarray | o3d.geometry.PointCloud, voxel: float, *, nor
         n = np.asarray(down.normals)
         down.normals = o3d.utility.Vector3dVector(n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12))
     return down
-
-
-def score_alignment(source_xyz: np.ndarray, target_xyz: np.ndarray, T: np.ndarray,
-                    delta: float) -> tuple[float, float]:
-    """(LCP, weighted LCP) of the source after ``T`` against the target at distance ``delta``."""
-    src = as_xyz(source_xyz, "source_xyz")
-    tree = cKDTree(as_xyz(target_xyz, "target_xyz"))
-    T = check_transform(T)
-    hard, soft = lcp_batch(src, T[None, :3, :3], T[None, :3, 3], tree, delta)
-    return float(hard[0]), float(soft[0])
 
 
 def refine_icp(source: np.ndarray | o3d.geometry.PointCloud, target: np.ndarray | o3d.geometry.PointCloud,
