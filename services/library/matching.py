@@ -23,7 +23,7 @@ Two stages, as the issue asks (the paper's stated next step toward recognising o
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -69,16 +69,11 @@ class FindConfig:
     upright: bool = True
     yaw_steps: int = 8
     ransac_trials: int = 1
-    ransac_iterations: int = 100_000
+    features: FeatureMatchConfig = FeatureMatchConfig()  # FPFH at 5 voxels, RANSAC's iterations
     icp_iterations: int = 30
     color_sigma: float = 0.1
     min_points: int = 50
     seed: int = 0
-
-
-def _feature_config(cfg: FindConfig) -> FeatureMatchConfig:
-    """FPFH at 5 voxels, RANSAC with ``ransac_iterations`` (the other settings are the blocks' defaults)."""
-    return FeatureMatchConfig(max_iteration=cfg.ransac_iterations)
 
 
 @dataclass
@@ -179,7 +174,7 @@ def _prepare(xyz: np.ndarray, rgb: np.ndarray | None, cfg: FindConfig) -> _Prepa
         raise BadModelInput(f"cloud has only {len(pcd.points)} points at voxel {cfg.voxel} m",
                             code="too_few_points", detail={"points": len(pcd.points)})
     pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2.5 * cfg.voxel, max_nn=30))
-    fpfh = fpfh_features(pcd, cfg.voxel, _feature_config(cfg))
+    fpfh = fpfh_features(pcd, cfg.voxel, cfg.features)
     pts = np.asarray(pcd.points)
     chroma = _chroma(np.asarray(pcd.colors)) if pcd.has_colors() else None
     return _Prepared(pcd, fpfh, pts, chroma, cKDTree(pts))
@@ -190,7 +185,7 @@ def _starts(query: _Prepared, model: _Prepared, cfg: FindConfig) -> list[np.ndar
     out = []
     for trial in range(cfg.ransac_trials):
         res = ransac_feature_match(query.pcd, model.pcd, query.fpfh, model.fpfh, 1.5 * cfg.inlier_distance,
-                                   seed=cfg.seed + trial, config=_feature_config(cfg))
+                                   seed=cfg.seed + trial, config=cfg.features)
         out.append(np.array(res.transformation))
     if cfg.upright:
         # put the query's centroid where it would be on the model: same height, pushed out from the model's
@@ -256,6 +251,3 @@ def register_and_score(query: _Prepared, model: _Prepared, cfg: FindConfig) -> d
     return {k: (round(v, 5) if isinstance(v, float) else v) for k, v in best.items()} | {
         "starts": cfg.ransac_trials + (cfg.yaw_steps if cfg.upright else 0)}
 
-
-def config_dict(cfg: FindConfig) -> dict[str, Any]:
-    return asdict(cfg)

@@ -43,11 +43,8 @@ class GlobalRegistrationConfig:
     """Parameters of the three methods (multiples are of the voxel size), Open3D-tutorial defaults."""
 
     normal_radius_factor: float = 2.5
-    fpfh_radius_factor: float = 5.0
-    fpfh_max_nn: int = 100
+    features: FeatureMatchConfig = FeatureMatchConfig()  # FPFH (FGR and RANSAC) and RANSAC's own settings
     ransac_distance_factor: float = 1.5
-    ransac_max_iteration: int = 100_000
-    ransac_confidence: float = 0.999
     fgr_distance_factor: float = 0.5
     fourpcs_max_time_s: float = 2.0
     fourpcs_sample_size: int = 200
@@ -180,9 +177,7 @@ def _translation_only_icp(src: np.ndarray, tgt_tree: cKDTree, T: np.ndarray, max
 
 def _feature_based(src: o3d.geometry.PointCloud, tgt: o3d.geometry.PointCloud, method: str, voxel: float,
                    seed: int, cfg: GlobalRegistrationConfig) -> np.ndarray:
-    features = FeatureMatchConfig(fpfh_radius_factor=cfg.fpfh_radius_factor, fpfh_max_nn=cfg.fpfh_max_nn,
-                                  max_iteration=cfg.ransac_max_iteration, confidence=cfg.ransac_confidence)
-    f_src, f_tgt = fpfh_features(src, voxel, features), fpfh_features(tgt, voxel, features)
+    f_src, f_tgt = fpfh_features(src, voxel, cfg.features), fpfh_features(tgt, voxel, cfg.features)
     if method == "fgr":
         opt = reg.FastGlobalRegistrationOption(maximum_correspondence_distance=cfg.fgr_distance_factor * voxel,
                                                seed=seed) if _fgr_has_seed() else \
@@ -190,7 +185,7 @@ def _feature_based(src: o3d.geometry.PointCloud, tgt: o3d.geometry.PointCloud, m
         out = reg.registration_fgr_based_on_feature_matching(src, tgt, f_src, f_tgt, opt)
         return np.array(out.transformation)
     out = ransac_feature_match(src, tgt, f_src, f_tgt, cfg.ransac_distance_factor * voxel, seed=seed,
-                               config=features)
+                               config=cfg.features)
     return np.array(out.transformation)
 
 
