@@ -63,6 +63,7 @@ from services.library.descriptors import DescriptorConfig, check_xyz, model_desc
 from services.library.errors import BadModelInput, LibraryError, ModelNotFound
 from services.library.matching import find as find_matches
 from services.library.metadata import ModelMetadata, slug
+from services.registration.cloud import CloudError, to_o3d
 
 log = logging.getLogger("objscan.library")
 
@@ -522,8 +523,6 @@ def _load_cloud(model: ModelInput) -> o3d.geometry.PointCloud:
             raise BadModelInput(f"{p} does not exist", code="io_error", detail={"path": str(p)})
         pcd = o3d.io.read_point_cloud(str(p))
     elif isinstance(model, PointCloud):
-        from services.registration.cloud import CloudError, to_o3d
-
         try:
             pcd = to_o3d(model)
         except CloudError as exc:

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 
+from common.atomic import atomic_path
 from common.errors import ObjscanError
 from common.geometry import as_rigid_transform, rotate_vectors, transform_points
 from common.messages import PointCloud, RGBDFrame
@@ -235,8 +236,6 @@ def transform_cloud(cloud: PointCloud, T: np.ndarray, frame: str | None = None) 
 
 def write_ply(path: Path | str, cloud: PointCloud | o3d.geometry.PointCloud, *, binary: bool = True) -> Path:
     """Write xyz (+ rgb, + normals when present) to a PLY file; parent folders are created."""
-    from common.atomic import atomic_path
-
     path = Path(path)
     pcd = cloud if isinstance(cloud, o3d.geometry.PointCloud) else to_o3d(cloud)
     # unique temporary name, fsync, rename, folder fsync: a reader never sees a half-written file, two

@@ -44,6 +44,7 @@ from services.registration.blocks import ColorICPConfig, colored_icp, overlap_on
 from services.registration.dynamic.global_registration import global_register
 from services.registration.dynamic.preprocess import Cloud
 from services.registration.dynamic.turn4dof import TurnSearchConfig, search_turn
+from services.registration.dynamic.views import DynamicRegistrationError
 
 reg = o3d.pipelines.registration
 
@@ -348,14 +349,10 @@ def register_pair(job: PairJob) -> PairResult:
     t0 = time.perf_counter()
     cfg = job.config
     if len(job.source) < 50 or len(job.target) < 50:
-        from services.registration.dynamic.views import DynamicRegistrationError
-
         raise DynamicRegistrationError("pair clouds too small to register", code="empty_view",
                                        detail={"pair": job.index, "source": len(job.source),
                                                "target": len(job.target)})
     if cfg.mode not in ("fast", "paper"):
-        from services.registration.dynamic.views import DynamicRegistrationError
-
         raise DynamicRegistrationError(f"unknown pair mode {cfg.mode!r}", code="bad_value",
                                        detail={"modes": ["fast", "paper"]})
     _down_cache().clear()
