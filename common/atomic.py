@@ -11,11 +11,17 @@ half of one, and a written file survives a power cut once the call returns:
 
 Any failure (disk full: ``ENOSPC``) removes the temporary file and raises ``OSError`` to the caller: nothing
 is swallowed, and the old file, if any, is untouched.
+
+A writer that commits a whole folder at once (the model library stages an entry's files, then renames the
+folder) writes its files in place instead, with ``write_synced`` / ``fsync_file``, and fsyncs the folders
+with ``fsync_dir``: the rename is its commit point. ``sha256_file`` is the digest such writers record and
+readers check.
 """
 
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import tempfile
 from collections.abc import Callable, Iterator
@@ -31,12 +37,30 @@ def fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
-def _fsync_path(path: str) -> None:
+def fsync_file(path: Path | str) -> None:
+    """fsync a file already written and closed (by a writer that only takes a path: Open3D, numpy)."""
     fd = os.open(path, os.O_RDONLY)
     try:
         os.fsync(fd)
     finally:
         os.close(fd)
+
+
+def write_synced(path: Path | str, data: bytes) -> None:
+    """Write ``data`` to ``path`` in place and fsync it: for files inside a folder committed by a rename."""
+    with open(path, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def sha256_file(path: Path | str) -> str:
+    """Hex SHA-256 of a file's bytes, read in 1 MiB chunks (models are tens of MB)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
 
 
 def _umask() -> int:
@@ -57,7 +81,7 @@ def atomic_path(path: Path | str) -> Iterator[Path]:
     os.close(fd)
     try:
         yield Path(tmp)
-        _fsync_path(tmp)
+        fsync_file(tmp)
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; session folders and libraries are shared
         os.replace(tmp, path)
         fsync_dir(path.parent)

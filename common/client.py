@@ -16,6 +16,7 @@ from typing import Any
 
 import zenoh
 
+from common import keys
 from common.codec import Message, decode
 from common.errors import RemoteError, RequestTimeout, ServiceUnavailable, WireError
 from common.messages import Error
@@ -104,8 +105,6 @@ def request_sync(session: zenoh.Session, key: str, msg: Message | None = None, *
 
 def live_services(session: zenoh.Session, timeout: float = 1.0) -> list[tuple[str, str]]:
     """(service, instance) of every service holding a liveliness token right now."""
-    from common import keys
-
     out = []
     for reply in session.liveliness().get(keys.ALL_ALIVE, timeout=timeout):
         if reply.ok is not None:

@@ -8,8 +8,18 @@ registration and the grasp planner agree on what a pose means.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy.spatial.transform import Rotation
+
+from common.errors import ObjscanError
+
+# How far R @ R.T may be from the identity for a matrix to count as a rotation. Poses cross the wire as
+# float64 and are composed from float64 parts, so real ones are orthonormal to ~1e-12; the bound only has
+# to reject scaled, sheared or garbage matrices, and is loose enough to accept every pose any caller sent
+# before the checks were one (they used 1e-4, 1e-5 and 1e-6).
+RIGID_ATOL = 1e-4
 
 
 def make_transform(rotation: np.ndarray | None = None, translation: np.ndarray | None = None) -> np.ndarray:
@@ -20,6 +30,36 @@ def make_transform(rotation: np.ndarray | None = None, translation: np.ndarray |
     if translation is not None:
         T[:3, 3] = np.asarray(translation, dtype=float).reshape(3)
     return T
+
+
+def as_rigid_transform(T: Any, name: str, error: type[ObjscanError], *, class_code: bool = False,
+                       atol: float = RIGID_ATOL) -> np.ndarray:
+    """Return ``T`` as a float64 4x4 rigid transform, or raise ``error`` saying what is wrong.
+
+    One check for every pose that enters a service (arm targets, camera poses, twin poses, calibration
+    files, wire transforms, clouds' camera poses): a NaN, a scaled matrix or a reflection would otherwise
+    silently corrupt what is computed from it. ``error`` is the caller's typed error; its code is
+    ``bad_shape`` for a wrong shape and ``bad_value`` otherwise, or the error class's own code when
+    ``class_code`` (a service whose callers branch on one code, e.g. the camera's ``bad_pose``).
+    """
+
+    def fail(message: str, code: str, **detail: Any) -> ObjscanError:
+        return error(message, code=None if class_code else code, detail={"field": name, **detail})
+
+    try:
+        M = np.asarray(T, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise fail(f"{name} is not a numeric array", "bad_value", type=type(T).__name__) from None
+    if M.shape != (4, 4):
+        raise fail(f"{name} must be 4x4, got {list(M.shape)}", "bad_shape", shape=list(M.shape))
+    if not np.all(np.isfinite(M)):
+        raise fail(f"{name} contains NaN or inf", "bad_value")
+    R = M[:3, :3]
+    if not np.allclose(R @ R.T, np.eye(3), atol=atol) or np.linalg.det(R) < 0 or \
+            not np.allclose(M[3], [0.0, 0.0, 0.0, 1.0]):
+        raise fail(f"{name} is not a rigid transform (rotation not orthonormal, a reflection, or last row "
+                   "not 0 0 0 1)", "bad_value")
+    return M
 
 
 def invert(T: np.ndarray) -> np.ndarray:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -88,8 +89,6 @@ class ServiceGroup:
     def wait_listening(self, label: str, timeout: float) -> None:
         """Wait until process ``label`` accepts TCP connections on the group's port (a router, or a peer
         that listens: a peer does not retry a refused connect, so the caller connects only after this)."""
-        import socket
-
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             with socket.socket() as s:

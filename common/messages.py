@@ -14,6 +14,7 @@ import numpy as np
 
 from common.codec import Message, array_field
 from common.errors import WireError
+from common.geometry import as_rigid_transform, matrix_to_pose, pose_to_matrix
 
 
 @dataclass(kw_only=True)
@@ -131,14 +132,10 @@ class Pose(Message):
             raise WireError("orientation is not a unit quaternion", code="bad_value", detail={"norm": norm})
 
     def matrix(self) -> np.ndarray:
-        from common.geometry import pose_to_matrix
-
         return pose_to_matrix(self.position, self.orientation)
 
     @classmethod
     def from_matrix(cls, T: np.ndarray, frame: str = "base") -> Pose:
-        from common.geometry import matrix_to_pose
-
         p, q = matrix_to_pose(T)
         return cls(position=p, orientation=q, frame=frame)
 
@@ -152,9 +149,7 @@ class Transform(Message):
     child: str = ""
 
     def validate(self) -> None:
-        R = self.matrix[:3, :3]
-        if not np.allclose(R @ R.T, np.eye(3), atol=1e-4) or not np.allclose(self.matrix[3], [0, 0, 0, 1]):
-            raise WireError("matrix is not a rigid transform", code="bad_value")
+        as_rigid_transform(self.matrix, "matrix", WireError)
 
 
 @dataclass(kw_only=True)

@@ -34,6 +34,7 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 import zenoh
 
 from common import keys
@@ -408,8 +409,6 @@ class Service:
 
 def _jsonable(obj: Any) -> Any:
     """Keep a detail map encodable: numpy scalars to Python, unknown objects to strings."""
-    import numpy as np
-
     if isinstance(obj, dict):
         return {str(k): _jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):

@@ -15,6 +15,7 @@ that a reader would take for a real one. Keys a reader does not know are ignored
 
 from __future__ import annotations
 
+import io
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -61,8 +62,6 @@ def json_default(o: Any) -> Any:
 
 
 def _png_bytes(image: Image.Image) -> bytes:
-    import io
-
     buf = io.BytesIO()
     image.save(buf, format="PNG")
     return buf.getvalue()

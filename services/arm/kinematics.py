@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from common.geometry import as_rigid_transform
 from services.arm.errors import BadCommand, IKError
 from services.arm.robot import MESH_PACKAGE_DIR, URDF_PATH
 
@@ -110,19 +111,7 @@ def wrist_flip(q: np.ndarray) -> np.ndarray:
 
 def check_transform(T: np.ndarray, name: str = "pose") -> np.ndarray:
     """Validate a 4x4 rigid transform (shape, finiteness, orthonormal rotation); returns float64."""
-    arr = np.asarray(T, dtype=np.float64)
-    if arr.shape != (4, 4):
-        raise BadCommand(f"{name} must be a 4x4 matrix", code="bad_shape", detail={"shape": list(arr.shape)})
-    if not np.all(np.isfinite(arr)):
-        raise BadCommand(f"{name} contains NaN or inf", code="bad_value")
-    R = arr[:3, :3]
-    if (
-        not np.allclose(R @ R.T, np.eye(3), atol=1e-6)
-        or np.linalg.det(R) < 0
-        or not np.allclose(arr[3], [0, 0, 0, 1])
-    ):
-        raise BadCommand(f"{name} is not a rigid transform", code="bad_value")
-    return arr
+    return as_rigid_transform(T, name, BadCommand)
 
 
 class Kinematics:

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from common.errors import ObjscanError
-from common.geometry import invert
+from common.geometry import as_rigid_transform, invert
 from common.session_folder import atomic_write_json
 
 FORMAT = 1
@@ -37,16 +37,7 @@ class CalibrationError(ObjscanError):
 
 
 def _rigid(value: Any, name: str) -> np.ndarray:
-    try:
-        T = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise CalibrationError(f"{name} is not a 4x4 matrix of numbers", detail={"field": name}) from None
-    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-        raise CalibrationError(f"{name} must be a finite 4x4 matrix", detail={"field": name})
-    R = T[:3, :3]
-    if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0 or not np.allclose(T[3], [0, 0, 0, 1]):
-        raise CalibrationError(f"{name} is not a rigid transform", detail={"field": name})
-    return T
+    return as_rigid_transform(value, name, CalibrationError, class_code=True)
 
 
 @dataclass

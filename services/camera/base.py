@@ -21,6 +21,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from common.errors import WireError
+from common.geometry import as_rigid_transform
 from common.messages import RGBDFrame
 from services.camera.errors import BadFrameError, BadPoseError, CameraError, NotConnectedError
 
@@ -47,19 +48,7 @@ def check_pose(T: Any) -> np.ndarray | None:
     """
     if T is None:
         return None
-    try:
-        arr = np.asarray(T, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise BadPoseError("camera pose is not numeric", detail={"type": type(T).__name__}) from None
-    if arr.shape != (4, 4):
-        raise BadPoseError("camera pose must be a 4x4 matrix", detail={"shape": list(arr.shape)})
-    if not np.all(np.isfinite(arr)):
-        raise BadPoseError("camera pose contains NaN or inf")
-    R = arr[:3, :3]
-    rigid = np.allclose(arr[3], [0, 0, 0, 1], atol=1e-9) and np.allclose(R @ R.T, np.eye(3), atol=1e-4)
-    if not rigid or np.linalg.det(R) < 0:
-        raise BadPoseError("camera pose is not a rigid transform (rotation not orthonormal or bad last row)")
-    return arr
+    return as_rigid_transform(T, "camera pose", BadPoseError, class_code=True)
 
 
 def check_frame(frame: Any, *, expected_size: tuple[int, int] | None = None) -> RGBDFrame:

@@ -35,13 +35,21 @@ def frontal_rotation(p1: np.ndarray, p2: np.ndarray, up: np.ndarray, approach_or
     if np.linalg.norm(x) < 1e-9:
         raise ValueError("grasp line parallel to the table normal has no horizontal approach")
     x = _unit(x)
-    mid = 0.5 * (p1 + p2)
-    away = mid - np.asarray(approach_origin, float)
-    away = away - (away @ up) * up
-    swapped = bool(np.linalg.norm(away) > 1e-9 and x @ away < 0)
+    swapped = _points_back(x, p1, p2, up, approach_origin)
     if swapped:
         x, y = -x, -y
     return np.column_stack([x, y, cross3(x, y)]), swapped
+
+
+def _points_back(axis: np.ndarray, p1: np.ndarray, p2: np.ndarray, up: np.ndarray,
+                 approach_origin: np.ndarray) -> bool:
+    """Whether ``axis`` points back toward ``approach_origin`` from the contacts' midpoint, in the table plane.
+
+    Both grasp frames flip their sign on this: the hand must come from the arm's side of the object.
+    """
+    away = 0.5 * (p1 + p2) - np.asarray(approach_origin, float)
+    away = away - (away @ up) * up
+    return bool(np.linalg.norm(away) > 1e-9 and axis @ away < 0)
 
 
 def top_down_rotation(p1: np.ndarray, p2: np.ndarray, up: np.ndarray, approach_origin: np.ndarray
@@ -55,10 +63,7 @@ def top_down_rotation(p1: np.ndarray, p2: np.ndarray, up: np.ndarray, approach_o
         raise ValueError("grasp line parallel to the table normal has no downward approach")
     x = _unit(down)
     z = cross3(x, y)
-    mid = 0.5 * (p1 + p2)
-    away = mid - np.asarray(approach_origin, float)
-    away = away - (away @ up) * up
-    swapped = bool(np.linalg.norm(away) > 1e-9 and z @ away < 0)
+    swapped = _points_back(z, p1, p2, up, approach_origin)
     if swapped:
         y, z = -y, -z
     return np.column_stack([x, y, z]), swapped

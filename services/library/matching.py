@@ -23,7 +23,7 @@ Two stages, as the issue asks (the paper's stated next step toward recognising o
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -34,6 +34,13 @@ from scipy.spatial import cKDTree
 from common.messages import PointCloud
 from services.library.descriptors import DescriptorConfig, check_xyz, describe, view_distance
 from services.library.errors import BadModelInput
+from services.registration.blocks import (
+    ColorICPConfig,
+    FeatureMatchConfig,
+    colored_icp,
+    fpfh_features,
+    ransac_feature_match,
+)
 
 
 class ModelSource(Protocol):
@@ -62,7 +69,7 @@ class FindConfig:
     upright: bool = True
     yaw_steps: int = 8
     ransac_trials: int = 1
-    ransac_iterations: int = 100_000
+    features: FeatureMatchConfig = FeatureMatchConfig()  # FPFH at 5 voxels, RANSAC's iterations
     icp_iterations: int = 30
     color_sigma: float = 0.1
     min_points: int = 50
@@ -167,7 +174,7 @@ def _prepare(xyz: np.ndarray, rgb: np.ndarray | None, cfg: FindConfig) -> _Prepa
         raise BadModelInput(f"cloud has only {len(pcd.points)} points at voxel {cfg.voxel} m",
                             code="too_few_points", detail={"points": len(pcd.points)})
     pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2.5 * cfg.voxel, max_nn=30))
-    fpfh = reg.compute_fpfh_feature(pcd, o3d.geometry.KDTreeSearchParamHybrid(radius=5.0 * cfg.voxel, max_nn=100))
+    fpfh = fpfh_features(pcd, cfg.voxel, cfg.features)
     pts = np.asarray(pcd.points)
     chroma = _chroma(np.asarray(pcd.colors)) if pcd.has_colors() else None
     return _Prepared(pcd, fpfh, pts, chroma, cKDTree(pts))
@@ -177,13 +184,8 @@ def _starts(query: _Prepared, model: _Prepared, cfg: FindConfig) -> list[np.ndar
     """Initial poses (query -> model): RANSAC results, and yaw hypotheses when both are upright."""
     out = []
     for trial in range(cfg.ransac_trials):
-        o3d.utility.random.seed(cfg.seed + trial)
-        res = reg.registration_ransac_based_on_feature_matching(
-            query.pcd, model.pcd, query.fpfh, model.fpfh, True, 1.5 * cfg.inlier_distance,
-            reg.TransformationEstimationPointToPoint(False), 3,
-            [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9),
-             reg.CorrespondenceCheckerBasedOnDistance(1.5 * cfg.inlier_distance)],
-            reg.RANSACConvergenceCriteria(cfg.ransac_iterations, 0.999))
+        res = ransac_feature_match(query.pcd, model.pcd, query.fpfh, model.fpfh, 1.5 * cfg.inlier_distance,
+                                   seed=cfg.seed + trial, config=cfg.features)
         out.append(np.array(res.transformation))
     if cfg.upright:
         # put the query's centroid where it would be on the model: same height, pushed out from the model's
@@ -205,11 +207,9 @@ def _refine(query: _Prepared, model: _Prepared, T: np.ndarray, cfg: FindConfig) 
         T = reg.registration_icp(query.pcd, model.pcd, dist, T, reg.TransformationEstimationPointToPlane(),
                                  crit).transformation
     if query.chroma is not None and model.chroma is not None:
-        try:
-            T = reg.registration_colored_icp(query.pcd, model.pcd, cfg.inlier_distance, T,
-                                             reg.TransformationEstimationForColoredICP(), crit).transformation
-        except RuntimeError:  # too few correspondences: keep the geometric result
-            pass
+        # a failed colour ICP (too few correspondences) keeps the geometric result
+        T = colored_icp(query.pcd, model.pcd, cfg.inlier_distance, T,
+                        ColorICPConfig(max_iteration=cfg.icp_iterations)).T
     return np.array(T)
 
 
@@ -251,6 +251,3 @@ def register_and_score(query: _Prepared, model: _Prepared, cfg: FindConfig) -> d
     return {k: (round(v, 5) if isinstance(v, float) else v) for k, v in best.items()} | {
         "starts": cfg.ransac_trials + (cfg.yaw_steps if cfg.upright else 0)}
 
-
-def config_dict(cfg: FindConfig) -> dict[str, Any]:
-    return asdict(cfg)

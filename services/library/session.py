@@ -8,11 +8,11 @@ orchestrator that crashed right after adding and resumed does not duplicate the 
 
 from __future__ import annotations
 
-import hashlib
 import json
 from pathlib import Path
 from typing import Any
 
+from common.atomic import sha256_file
 from services.library.errors import BadModelInput
 from services.library.metadata import ModelMetadata
 from services.library.store import ModelLibrary
@@ -51,7 +51,7 @@ def session_metadata(session_dir: str | Path) -> ModelMetadata:
         created=model.stat().st_mtime, session=str(session), configuration=figures.get("configuration"),
         quality={k: v for k, v in quality.items() if v is not None}, source="session",
         extra={"profile": info.get("profile", config.get("profile")), "seed": info.get("seed", config.get("seed")),
-               "views": len(info.get("views", [])), "model_sha256": _sha256(model)})
+               "views": len(info.get("views", [])), "model_sha256": sha256_file(model)})
 
 
 def add_session_model(library_root: str | Path, session_dir: str | Path) -> str:
@@ -79,11 +79,3 @@ def _json(path: Path) -> dict[str, Any]:
         raise BadModelInput(f"{path} is not valid JSON: {exc}", code="bad_session",
                             detail={"path": str(path)}) from None
     return data if isinstance(data, dict) else {}
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()

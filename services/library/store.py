@@ -39,6 +39,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import hashlib
+import io
 import json
 import logging
 import os
@@ -55,13 +56,14 @@ from typing import Any
 import numpy as np
 import open3d as o3d
 
-from common.atomic import atomic_write_bytes, atomic_write_with, fsync_dir
+from common.atomic import atomic_write_bytes, atomic_write_with, fsync_dir, fsync_file, sha256_file, write_synced
 from common.messages import PointCloud
 from common.session_folder import json_default
 from services.library.descriptors import DescriptorConfig, check_xyz, model_descriptors
 from services.library.errors import BadModelInput, LibraryError, ModelNotFound
 from services.library.matching import find as find_matches
 from services.library.metadata import ModelMetadata, slug
+from services.registration.cloud import CloudError, to_o3d
 
 log = logging.getLogger("objscan.library")
 
@@ -186,11 +188,11 @@ class ModelLibrary:
                 self._fault("files_written")
                 record = {"id": entry_id, "points": len(pcd.points), "files": files, "metadata": meta.to_dict()}
                 _write_synced(stage / METADATA_FILE, json.dumps(record, indent=2, default=json_default).encode())
-                _fsync_dir(stage)
+                fsync_dir(stage)
                 self._fault("metadata_written")
                 os.rename(stage, final)
-                _fsync_dir(final.parent)
-                _fsync_dir(stage.parent)
+                fsync_dir(final.parent)
+                fsync_dir(stage.parent)
             except BaseException:
                 shutil.rmtree(stage, ignore_errors=True)
                 raise
@@ -317,7 +319,7 @@ class ModelLibrary:
         trash = self.root / TRASH / f"{entry_id}.{os.getpid()}"
         if src.exists():
             os.rename(src, trash)
-            _fsync_dir(src.parent)
+            fsync_dir(src.parent)
         fault("trashed")
         with self._transaction() as db:
             db.execute("DELETE FROM models WHERE id = ?", (entry_id,))
@@ -475,39 +477,23 @@ def _complete_record(folder: Path) -> dict[str, Any] | None:
         ModelMetadata.from_dict(record["metadata"])
         for name, info in record["files"].items():
             p = folder / name
-            if not p.is_file() or p.stat().st_size != int(info["bytes"]) or _sha256(p) != info["sha256"]:
+            if not p.is_file() or p.stat().st_size != int(info["bytes"]) or sha256_file(p) != info["sha256"]:
                 return None
         return record
     except (OSError, ValueError, KeyError, TypeError, BadModelInput):
         return None
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def _write_synced(path: Path, data: bytes) -> dict[str, Any]:
-    with open(path, "wb") as fh:
-        fh.write(data)
-        fh.flush()
-        os.fsync(fh.fileno())
+    """Write a staged file and return its record (size, digest) for the entry's metadata."""
+    write_synced(path, data)
     return {"bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}
 
 
 def _fsync_file(path: Path) -> dict[str, Any]:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-    return {"bytes": path.stat().st_size, "sha256": _sha256(path)}
-
-
-_fsync_dir = fsync_dir  # the staging folder's files are written in place: the folder rename is the commit
+    """fsync a staged file another library wrote (Open3D) and return its record (size, digest)."""
+    fsync_file(path)
+    return {"bytes": path.stat().st_size, "sha256": sha256_file(path)}
 
 
 def _write_cloud(path: Path, pcd: o3d.geometry.PointCloud) -> dict[str, Any]:
@@ -523,8 +509,6 @@ def _write_mesh(path: Path, mesh: o3d.geometry.TriangleMesh) -> dict[str, Any]:
 
 
 def _write_npz(path: Path, desc: dict[str, Any]) -> dict[str, Any]:
-    import io
-
     buf = io.BytesIO()
     np.savez(buf, whole=np.asarray(desc["whole"]), views=np.asarray(desc["views"]),
              n_bins=np.asarray(desc["n_bins"]))
@@ -539,8 +523,6 @@ def _load_cloud(model: ModelInput) -> o3d.geometry.PointCloud:
             raise BadModelInput(f"{p} does not exist", code="io_error", detail={"path": str(p)})
         pcd = o3d.io.read_point_cloud(str(p))
     elif isinstance(model, PointCloud):
-        from services.registration.cloud import CloudError, to_o3d
-
         try:
             pcd = to_o3d(model)
         except CloudError as exc:

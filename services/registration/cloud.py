@@ -16,8 +16,9 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 
+from common.atomic import atomic_path
 from common.errors import ObjscanError
-from common.geometry import rotate_vectors, transform_points
+from common.geometry import as_rigid_transform, rotate_vectors, transform_points
 from common.messages import PointCloud, RGBDFrame
 
 
@@ -78,12 +79,7 @@ def check_frame(frame: RGBDFrame) -> None:
     if (frame.meta or {}).get("pose_source") == "unknown":  # issue 17 #12: the identity stood in for a pose
         raise CloudError("frame has no camera pose (pose_source=unknown: the pose query failed when it was "
                          "captured); it cannot be placed in base", code="no_camera_pose")
-    T = np.asarray(frame.T_base_camera, dtype=np.float64)
-    if T.shape != (4, 4) or not np.isfinite(T).all():
-        raise CloudError("T_base_camera must be a finite 4x4 matrix", code="bad_value")
-    R = T[:3, :3]
-    if not np.allclose(R @ R.T, np.eye(3), atol=1e-4) or not np.allclose(T[3], [0, 0, 0, 1]):
-        raise CloudError("T_base_camera is not a rigid transform", code="bad_value")
+    as_rigid_transform(frame.T_base_camera, "T_base_camera", CloudError)
 
 
 def depth_edge_mask(depth_m: np.ndarray, threshold: float) -> np.ndarray:
@@ -240,8 +236,6 @@ def transform_cloud(cloud: PointCloud, T: np.ndarray, frame: str | None = None) 
 
 def write_ply(path: Path | str, cloud: PointCloud | o3d.geometry.PointCloud, *, binary: bool = True) -> Path:
     """Write xyz (+ rgb, + normals when present) to a PLY file; parent folders are created."""
-    from common.atomic import atomic_path
-
     path = Path(path)
     pcd = cloud if isinstance(cloud, o3d.geometry.PointCloud) else to_o3d(cloud)
     # unique temporary name, fsync, rename, folder fsync: a reader never sees a half-written file, two

@@ -15,6 +15,7 @@ import queue
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -193,16 +194,10 @@ def dynamic_config(d: dict) -> DynamicConfig:
     else:
         cfg = DynamicConfig(configuration=d.get("configuration", "auto"))
     if "model_voxel" in d:
-        from dataclasses import replace
-
         cfg = replace(cfg, model_voxel=float(d["model_voxel"]))
     if isinstance(d.get("pair"), dict):
-        from dataclasses import replace
-
         cfg = replace(cfg, pair=replace(cfg.pair, **d["pair"]))
     if isinstance(d.get("preprocess"), dict):
-        from dataclasses import replace
-
         try:
             cfg = replace(cfg, preprocess=replace(cfg.preprocess, **d["preprocess"]))
         except TypeError as exc:

@@ -16,19 +16,18 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from common.errors import ObjscanError
 from common.session_folder import atomic_write_json, read_scan, read_session
 from services.registration.cloud import write_ply
+from services.registration.dynamic.model import DynamicConfig, MapPairs, build_model
 from services.registration.dynamic.pair import register_pair
+from services.registration.dynamic.views import view_from_static
 from services.registration.static import StaticConfig, ViewResult, register_view
 from services.registration.static.pose_errors import prior_pose_errors, relative_pose_errors
-
-if TYPE_CHECKING:
-    from services.registration.dynamic.model import MapPairs
 
 Progress = Callable[[dict[str, Any]], None]
 
@@ -171,9 +170,6 @@ def run_dynamic_stage(
     Views are taken in index order with their commanded cumulative turns; fewer than 3 usable views
     (or a dynamic-stage error) is reported in the returned figures, not raised, like a failed view.
     """
-    from services.registration.dynamic.model import DynamicConfig, build_model
-    from services.registration.dynamic.views import view_from_static
-
     t0 = time.perf_counter()
     order = sorted(results)
     views = [view_from_static(results[k], session.commanded_turn_deg(k), index=k) for k in order]

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from common.errors import ObjscanError
+from common.geometry import as_rigid_transform
 
 
 class SimError(ObjscanError):
@@ -39,17 +40,4 @@ def check_transform(T: np.ndarray, name: str) -> np.ndarray:
     Every pose entering the twin goes through here: a NaN or a scaled matrix would otherwise silently
     render garbage or corrupt the world state.
     """
-    try:
-        M = np.asarray(T, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise SimInputError(f"{name} is not a numeric array", detail={"field": name}) from None
-    if M.shape != (4, 4):
-        raise SimInputError(f"{name} must be 4x4, got {list(M.shape)}", code="bad_shape",
-                            detail={"field": name, "shape": list(M.shape)})
-    if not np.all(np.isfinite(M)):
-        raise SimInputError(f"{name} contains NaN or inf", code="bad_value", detail={"field": name})
-    R = M[:3, :3]
-    if not np.allclose(R @ R.T, np.eye(3), atol=1e-5) or np.linalg.det(R) < 0 or \
-            not np.allclose(M[3], [0.0, 0.0, 0.0, 1.0]):
-        raise SimInputError(f"{name} is not a rigid transform", code="bad_value", detail={"field": name})
-    return M
+    return as_rigid_transform(T, name, SimInputError)

@@ -75,8 +75,10 @@ STRATEGIES = {
     "JointState": st.integers(0, 7).flatmap(lambda n: st.builds(
         JointState, names=st.lists(small_text, min_size=n, max_size=n), position=arrays(np.float64, (n,)),
         velocity=st.none() | arrays(np.float64, (n,)), stamp=st.floats(0, 1e9), moving=st.booleans())),
-    "Plane": st.builds(lambda n, c, d: Plane(normal=n[:3] / np.linalg.norm(n[:3]), offset=d, center=c),
-                       unit_quats, arrays(np.float64, (3,)), finite),
+    # a unit quaternion's first three components can all be 0 (the identity): the normal needs its own draw
+    "Plane": st.builds(lambda n, c, d: Plane(normal=n / np.linalg.norm(n), offset=d, center=c),
+                       unit_quats.map(lambda q: q[:3]).filter(lambda n: np.linalg.norm(n) > 0.1),
+                       arrays(np.float64, (3,)), finite),
     "Grasp": st.builds(Grasp, kind=st.sampled_from(["frontal", "top_down"]), contacts=arrays(np.float64, (2, 3)),
                        width=st.floats(0, 0.2), rank=finite, metrics=st.dictionaries(small_text, finite, max_size=4),
                        poses=st.dictionaries(small_text, st.builds(Pose, position=arrays(np.float64, (3,)),

@@ -160,6 +160,23 @@ def test_fast_pair_recovers_the_true_neighbour_transform(milk_scan, milk_prepare
         assert res.path in ("prior", "global") and res.fitness > 0.7
 
 
+@pytest.mark.slow
+def test_paper_pair_recovers_the_true_neighbour_transform(milk_scan, milk_prepared):
+    """The paper's path (global 4PCS, colour ICP + overlap removal + GICP at 8/4.5/1 mm, final colour ICP and
+    point-to-plane), one attempt: ~40 s a pair on 2 busy cores. Its overlap removal is the shared
+    ``blocks.overlap_only`` (each cloud's own mean spacing, as the paper defines d)."""
+    prep = milk_prepared
+    for k in (0, 5):
+        s, t = neighbour_edges(12)[k]
+        job = PairJob(k, s, t, prep.views[s].reduced, prep.views[t].reduced, prep.center, prep.axis,
+                      PairConfig(mode="paper", attempts=1))
+        res = register_pair(job)
+        T_true = _true_edge(milk_scan, prep, s, t)
+        err = _mean_displacement_mm(res.T, T_true, prep.views[s].cloud.xyz)
+        assert res.path == "paper" and res.color_icp_failures <= 2
+        assert err < 1.0, (k, err)
+
+
 def test_pair_job_is_picklable_and_runs_in_another_process(milk_prepared):
     prep = milk_prepared
     s, t = neighbour_edges(12)[2]

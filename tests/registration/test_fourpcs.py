@@ -14,9 +14,9 @@ from services.registration.dynamic.fourpcs import (
     _kabsch_batch,
     _select_base,
     default_max_bases,
-    lcp_score,
     register_4pcs,
     register_4pcs_overlaps,
+    score_alignment,
 )
 from services.registration.dynamic.fourpcs_common import PointCloudInputError
 from services.registration.dynamic.global_registration import preprocess, refine_icp
@@ -158,8 +158,8 @@ def test_base_is_wide_coplanar_and_its_segments_cross():
 def test_lcp_score_counts_points_within_delta():
     rng = np.random.default_rng(4)
     P = rng.uniform(size=(500, 3))
-    assert lcp_score(P, P, np.eye(4), 0.001) == 1.0
-    assert lcp_score(P, P, make_transform(translation=[5.0, 0, 0]), 0.01) == 0.0
+    assert score_alignment(P, P, np.eye(4), 0.001) == (1.0, 1.0)
+    assert score_alignment(P, P, make_transform(translation=[5.0, 0, 0]), 0.01) == (0.0, 0.0)
 
 
 def test_default_bases_grow_as_overlap_shrinks():

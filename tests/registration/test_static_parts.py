@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
-import open3d as o3d
 import pytest
 
 from common.geometry import make_transform, rotation_about_axis
 from common.messages import Plane
 from services.registration.static import NoTableError
-from services.registration.static import pairwise as pw
 from services.registration.static.isolate import footprint_centre
 from services.registration.static.table import segment_table
 
@@ -22,19 +20,6 @@ def test_footprint_centre_of_a_rotated_box():
     centre, height = footprint_centre(pts, plane)
     np.testing.assert_allclose(centre, [0.3, 0.1, 0.0], atol=1e-3)
     assert height == pytest.approx(0.12, abs=2e-3)
-
-
-def test_overlap_only_keeps_points_within_the_mean_spacing():
-    g = np.stack(np.meshgrid(np.arange(0, 0.1, 0.002), np.arange(0, 0.1, 0.002)), -1).reshape(-1, 2)
-    a = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.column_stack([g, np.zeros(len(g))])))
-    b = o3d.geometry.PointCloud(a)
-    b.translate([0.05, 0.0, 0.0])  # half of b overlaps a
-    assert pw.mean_spacing(a) == pytest.approx(0.002, rel=1e-6)
-    sa, sb = pw.overlap_only(a, b, np.eye(4))
-    xa = np.asarray(sa.points)[:, 0]
-    xb = np.asarray(sb.points)[:, 0]
-    assert xa.min() >= 0.05 - 1e-9 and len(sa.points) == pytest.approx(len(a.points) / 2, rel=0.05)
-    assert xb.max() <= 0.1 + 1e-9 and len(sb.points) == pytest.approx(len(b.points) / 2, rel=0.05)
 
 
 def _table_with_box(T: np.ndarray) -> np.ndarray:

@@ -21,6 +21,7 @@ from scipy.spatial import cKDTree
 from common.geometry import invert, rotation_angle_deg
 from services.registration.dynamic.pair import PairResult, crop_to_overlap
 from services.registration.dynamic.preprocess import Prepared
+from services.registration.dynamic.views import DynamicRegistrationError
 
 reg = o3d.pipelines.registration
 
@@ -70,8 +71,6 @@ def chain_poses(n_views: int, results: list[PairResult], skip: set[int] | None =
                 poses[r.target_view] = poses[k] @ invert(r.T)
                 queue.append(r.target_view)
     if any(p is None for p in poses):
-        from services.registration.dynamic.views import DynamicRegistrationError
-
         raise DynamicRegistrationError("pair edges do not connect every view", code="disconnected",
                                        detail={"missing": [i for i, p in enumerate(poses) if p is None]})
     return [np.asarray(p) for p in poses]

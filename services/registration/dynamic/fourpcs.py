@@ -49,6 +49,7 @@ from services.registration.dynamic.fourpcs_common import (
     PointCloudInputError,
     as_optional_rows,
     as_xyz,
+    check_transform,
 )
 from services.registration.dynamic.fourpcs_kernels import match_congruent
 
@@ -221,22 +222,18 @@ def default_max_bases(overlap: float, success: float = 0.99, factor: float = 4.0
     return max(8, int(math.ceil(factor * math.log(1.0 - success) / math.log(1.0 - p))))
 
 
-def lcp_score(source_xyz: np.ndarray, target_xyz: np.ndarray | cKDTree, T: np.ndarray,
-              delta: float) -> float:
-    """Fraction of source points within ``delta`` of the target after ``T`` (the LCP measure)."""
+def score_alignment(source_xyz: np.ndarray, target_xyz: np.ndarray | cKDTree, T: np.ndarray,
+                    delta: float) -> tuple[float, float]:
+    """(LCP, weighted LCP) of the source after ``T`` against the target (points or their KD-tree) at ``delta``.
+
+    LCP is the fraction of source points within ``delta`` of the target; the weighted one,
+    mean(max(0, 1 - d^2 / delta^2)), is the score candidates are ranked by.
+    """
     src = as_xyz(source_xyz, "source_xyz")
     tree = target_xyz if isinstance(target_xyz, cKDTree) else cKDTree(as_xyz(target_xyz, "target_xyz"))
-    T = np.asarray(T, dtype=np.float64)
-    return float(lcp_batch(src, T[None, :3, :3], T[None, :3, 3], tree, delta)[0][0])
-
-
-def weighted_lcp_score(source_xyz: np.ndarray, target_xyz: np.ndarray | cKDTree, T: np.ndarray,
-                       delta: float) -> float:
-    """mean(max(0, 1 - d^2 / delta^2)) over source points after ``T``: the score candidates are ranked by."""
-    src = as_xyz(source_xyz, "source_xyz")
-    tree = target_xyz if isinstance(target_xyz, cKDTree) else cKDTree(as_xyz(target_xyz, "target_xyz"))
-    T = np.asarray(T, dtype=np.float64)
-    return float(lcp_batch(src, T[None, :3, :3], T[None, :3, 3], tree, delta)[1][0])
+    T = check_transform(T)
+    hard, soft = lcp_batch(src, T[None, :3, :3], T[None, :3, 3], tree, delta)
+    return float(hard[0]), float(soft[0])
 
 
 class _DistanceGrid:

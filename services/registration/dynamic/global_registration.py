@@ -22,7 +22,8 @@ import numpy as np
 import open3d as o3d
 from scipy.spatial import cKDTree
 
-from services.registration.dynamic.fourpcs import FourPCSConfig, lcp_batch, register_4pcs_overlaps
+from services.registration.blocks import FeatureMatchConfig, fpfh_features, ransac_feature_match
+from services.registration.dynamic.fourpcs import FourPCSConfig, register_4pcs_overlaps, score_alignment
 from services.registration.dynamic.fourpcs_common import (
     GlobalResult,
     PointCloudInputError,
@@ -42,11 +43,8 @@ class GlobalRegistrationConfig:
     """Parameters of the three methods (multiples are of the voxel size), Open3D-tutorial defaults."""
 
     normal_radius_factor: float = 2.5
-    fpfh_radius_factor: float = 5.0
-    fpfh_max_nn: int = 100
+    features: FeatureMatchConfig = FeatureMatchConfig()  # FPFH (FGR and RANSAC) and RANSAC's own settings
     ransac_distance_factor: float = 1.5
-    ransac_max_iteration: int = 100_000
-    ransac_confidence: float = 0.999
     fgr_distance_factor: float = 0.5
     fourpcs_max_time_s: float = 2.0
     fourpcs_sample_size: int = 200
@@ -144,16 +142,6 @@ def preprocess(cloud: np.ndarray | o3d.geometry.PointCloud, voxel: float, *, nor
     return down
 
 
-def score_alignment(source_xyz: np.ndarray, target_xyz: np.ndarray, T: np.ndarray,
-                    delta: float) -> tuple[float, float]:
-    """(LCP, weighted LCP) of the source after ``T`` against the target at distance ``delta``."""
-    src = as_xyz(source_xyz, "source_xyz")
-    tree = cKDTree(as_xyz(target_xyz, "target_xyz"))
-    T = check_transform(T)
-    hard, soft = lcp_batch(src, T[None, :3, :3], T[None, :3, 3], tree, delta)
-    return float(hard[0]), float(soft[0])
-
-
 def refine_icp(source: np.ndarray | o3d.geometry.PointCloud, target: np.ndarray | o3d.geometry.PointCloud,
                T_init: np.ndarray, *, voxel: float = 0.004, max_correspondence_factor: float = 2.0,
                iterations: int = 50) -> tuple[np.ndarray, float, float]:
@@ -189,22 +177,15 @@ def _translation_only_icp(src: np.ndarray, tgt_tree: cKDTree, T: np.ndarray, max
 
 def _feature_based(src: o3d.geometry.PointCloud, tgt: o3d.geometry.PointCloud, method: str, voxel: float,
                    seed: int, cfg: GlobalRegistrationConfig) -> np.ndarray:
-    feat_param = o3d.geometry.KDTreeSearchParamHybrid(radius=cfg.fpfh_radius_factor * voxel,
-                                                      max_nn=cfg.fpfh_max_nn)
-    f_src = reg.compute_fpfh_feature(src, feat_param)
-    f_tgt = reg.compute_fpfh_feature(tgt, feat_param)
+    f_src, f_tgt = fpfh_features(src, voxel, cfg.features), fpfh_features(tgt, voxel, cfg.features)
     if method == "fgr":
         opt = reg.FastGlobalRegistrationOption(maximum_correspondence_distance=cfg.fgr_distance_factor * voxel,
                                                seed=seed) if _fgr_has_seed() else \
             reg.FastGlobalRegistrationOption(maximum_correspondence_distance=cfg.fgr_distance_factor * voxel)
         out = reg.registration_fgr_based_on_feature_matching(src, tgt, f_src, f_tgt, opt)
         return np.array(out.transformation)
-    dist = cfg.ransac_distance_factor * voxel
-    o3d.utility.random.seed(seed)
-    out = reg.registration_ransac_based_on_feature_matching(
-        src, tgt, f_src, f_tgt, True, dist, reg.TransformationEstimationPointToPoint(False), 3,
-        [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)],
-        reg.RANSACConvergenceCriteria(cfg.ransac_max_iteration, cfg.ransac_confidence))
+    out = ransac_feature_match(src, tgt, f_src, f_tgt, cfg.ransac_distance_factor * voxel, seed=seed,
+                               config=cfg.features)
     return np.array(out.transformation)
 
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -143,8 +144,6 @@ def sequential_map(jobs: list[PairJob]) -> list[PairResult]:
 
 def process_pool_map(workers: int) -> MapPairs:
     """A ``map_pairs`` that runs jobs in ``workers`` local processes (for benchmarks and offline use)."""
-    from concurrent.futures import ProcessPoolExecutor
-
     def run(jobs: list[PairJob]) -> list[PairResult]:
         with ProcessPoolExecutor(max_workers=workers) as pool:
             return list(pool.map(register_pair, jobs))

@@ -40,8 +40,11 @@ import open3d as o3d
 from scipy.spatial import cKDTree
 
 from common.geometry import rotation_about_line
+from services.registration.blocks import ColorICPConfig, colored_icp, overlap_only
+from services.registration.dynamic.global_registration import global_register
 from services.registration.dynamic.preprocess import Cloud
 from services.registration.dynamic.turn4dof import TurnSearchConfig, search_turn
+from services.registration.dynamic.views import DynamicRegistrationError
 
 reg = o3d.pipelines.registration
 
@@ -54,7 +57,7 @@ class PairConfig:
     regions: bool = False
     crop: bool = False
     attempts: int = 5
-    global_method: str = "auto"  # "auto" (4pcs when available, else fpfh_ransac) | "4pcs" | "fpfh_ransac" | "fgr"
+    global_method: str = "auto"  # "auto" (= 4pcs) | "4pcs" | "fpfh_ransac" | "fgr"
     global_voxel: float = 0.008
     overlaps: tuple[float, ...] = (0.9, 0.85, 0.8)
     local_voxels: tuple[float, ...] = (0.008, 0.0045, 0.001)
@@ -238,15 +241,8 @@ def _down(cloud: Cloud, voxel: float) -> o3d.geometry.PointCloud:
 def _colored_icp(s: o3d.geometry.PointCloud, t: o3d.geometry.PointCloud, max_corr: float, T: np.ndarray,
                  iters: int) -> tuple[np.ndarray, bool]:
     """Color ICP; returns (T, ok). A failure (no correspondences, exception) keeps the input ``T``."""
-    try:
-        r = reg.registration_colored_icp(
-            s, t, max_corr, T, reg.TransformationEstimationForColoredICP(lambda_geometric=0.968),
-            reg.ICPConvergenceCriteria(relative_fitness=1e-6, relative_rmse=1e-6, max_iteration=iters))
-    except RuntimeError:
-        return T, False
-    if r.fitness <= 0.0 or not np.isfinite(r.transformation).all():
-        return T, False
-    return np.asarray(r.transformation), True
+    out = colored_icp(s, t, max_corr, T, ColorICPConfig(max_iteration=iters))
+    return (out.T, True) if out.ok else (T, False)
 
 
 def _point_to_plane(s: o3d.geometry.PointCloud, t: o3d.geometry.PointCloud, max_corr: float, T: np.ndarray,
@@ -255,18 +251,6 @@ def _point_to_plane(s: o3d.geometry.PointCloud, t: o3d.geometry.PointCloud, max_
                              reg.ICPConvergenceCriteria(relative_fitness=1e-6, relative_rmse=1e-6,
                                                         max_iteration=iters))
     return np.asarray(r.transformation) if r.fitness > 0 else T
-
-
-def _overlap_only(s: o3d.geometry.PointCloud, t: o3d.geometry.PointCloud, T: np.ndarray,
-                  multiplier: float) -> tuple[o3d.geometry.PointCloud, o3d.geometry.PointCloud]:
-    """Drop points with no partner within ``multiplier`` x the target's mean nearest-neighbour spacing."""
-    spacing = float(np.mean(np.asarray(t.compute_nearest_neighbor_distance()))) if len(t.points) > 1 else 0.0
-    radius = max(multiplier * spacing, 1e-4)
-    ps = np.asarray(s.points) @ T[:3, :3].T + T[:3, 3]
-    pt = np.asarray(t.points)
-    ds, _ = cKDTree(pt).query(ps, k=1, distance_upper_bound=radius)
-    dt, _ = cKDTree(ps).query(pt, k=1, distance_upper_bound=radius)
-    return s.select_by_index(np.flatnonzero(np.isfinite(ds))), t.select_by_index(np.flatnonzero(np.isfinite(dt)))
 
 
 def _gicp(s: o3d.geometry.PointCloud, t: o3d.geometry.PointCloud, max_corr: float, T: np.ndarray,
@@ -284,36 +268,10 @@ def _gicp(s: o3d.geometry.PointCloud, t: o3d.geometry.PointCloud, max_corr: floa
 
 def global_align(source: Cloud, target: Cloud, voxel: float, overlap: float, seed: int,
                  method: str = "auto") -> tuple[np.ndarray, float, str]:
-    """Global registration behind one call: (T, score, method used).
-
-    Uses part A's ``global_registration.global_register`` (4PCS, FPFH-RANSAC, FGR) when it is present;
-    until then, and for ``fpfh_ransac`` when it is not, open3d's FPFH-RANSAC directly.
-    """
-    try:
-        from services.registration.dynamic.global_registration import global_register
-    except ImportError:
-        global_register = None
-    if global_register is not None:
-        m = "4pcs" if method == "auto" else method
-        res = global_register(source.xyz, target.xyz, method=m, voxel=voxel, overlap=overlap, seed=seed)
-        return np.asarray(res.T, dtype=float), float(res.lcp_score), m
-    return _fpfh_ransac(source, target, voxel, seed) + ("fpfh_ransac",)
-
-
-def _fpfh_ransac(source: Cloud, target: Cloud, voxel: float, seed: int) -> tuple[np.ndarray, float]:
-    o3d.utility.random.seed(int(seed) & 0x7FFFFFFF)
-    s, t = _down(source, voxel), _down(target, voxel)
-    if len(s.points) < 10 or len(t.points) < 10:
-        return np.eye(4), 0.0
-    param = o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)
-    fs = reg.compute_fpfh_feature(s, param)
-    ft = reg.compute_fpfh_feature(t, param)
-    dist = 1.5 * voxel
-    r = reg.registration_ransac_based_on_feature_matching(
-        s, t, fs, ft, True, dist, reg.TransformationEstimationPointToPoint(False), 3,
-        [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)],
-        reg.RANSACConvergenceCriteria(50_000, 0.999))
-    return np.asarray(r.transformation), float(r.fitness)
+    """Global registration behind one call: (T, score, method used); ``auto`` is 4PCS."""
+    m = "4pcs" if method == "auto" else method
+    res = global_register(source.xyz, target.xyz, method=m, voxel=voxel, overlap=overlap, seed=seed)
+    return np.asarray(res.T, dtype=float), float(res.lcp_score), m
 
 
 # ----------------------------------------------------------------------------------------- local stages
@@ -328,7 +286,7 @@ def paper_local(source: Cloud, target: Cloud, T0: np.ndarray, cfg: PairConfig) -
         fails += 0 if ok else 1
         if fails > cfg.max_color_icp_failures:
             return None, fails
-        so, to = _overlap_only(s, t, T, mult)
+        so, to = overlap_only(s, t, T, mult)
         T = _gicp(so, to, 1.5 * voxel, T, cfg.icp_iterations)
     s, t = _down(source, cfg.final_voxel), _down(target, cfg.final_voxel)
     T, ok = _colored_icp(s, t, 1.5 * cfg.final_voxel, T, cfg.icp_iterations)
@@ -391,14 +349,10 @@ def register_pair(job: PairJob) -> PairResult:
     t0 = time.perf_counter()
     cfg = job.config
     if len(job.source) < 50 or len(job.target) < 50:
-        from services.registration.dynamic.views import DynamicRegistrationError
-
         raise DynamicRegistrationError("pair clouds too small to register", code="empty_view",
                                        detail={"pair": job.index, "source": len(job.source),
                                                "target": len(job.target)})
     if cfg.mode not in ("fast", "paper"):
-        from services.registration.dynamic.views import DynamicRegistrationError
-
         raise DynamicRegistrationError(f"unknown pair mode {cfg.mode!r}", code="bad_value",
                                        detail={"modes": ["fast", "paper"]})
     _down_cache().clear()

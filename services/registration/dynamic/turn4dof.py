@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from common.geometry import make_transform, rotation_about_axis
+from common.geometry import make_transform, rotation_about_axis, yaw_deg_about
 from services.registration.dynamic.preprocess import Cloud
 
 
@@ -221,8 +221,6 @@ def search_turn(source: Cloud, target: Cloud, axis: np.ndarray, center: np.ndarr
 def project_to_turn(T: np.ndarray, axis: np.ndarray, center: np.ndarray) -> np.ndarray:
     """The 4-DoF transform nearest ``T``: its yaw about ``axis`` (tilt dropped), moving ``center`` where
     ``T`` moves it."""
-    from common.geometry import yaw_deg_about
-
     c = np.asarray(center, dtype=float).reshape(3)
     R = rotation_about_axis(axis, np.radians(yaw_deg_about(axis, T[:3, :3])))
     return make_transform(R, T[:3, :3] @ c + T[:3, 3] - R @ c)

@@ -1,7 +1,8 @@
 """Pairwise registration steps, each a thin, named wrapper over Open3D's legacy pipeline.
 
-The legacy API is the fast one on CPU for voxel-down-sampled clouds (ecosystem-notes §5). Every function
-takes ``source`` and ``target`` with normals (and colors where used) and returns a ``PairResult`` whose
+The legacy API is the fast one on CPU for voxel-down-sampled clouds (ecosystem-notes §5). Feature
+matching, colour ICP and the overlap removal are the shared blocks of ``registration/blocks.py``. Every
+function takes ``source`` and ``target`` with normals (and colors where used) and returns a ``PairResult`` whose
 ``T`` maps source points onto target points.
 """
 
@@ -11,7 +12,14 @@ from dataclasses import dataclass
 
 import numpy as np
 import open3d as o3d
-from scipy.spatial import cKDTree
+
+from services.registration.blocks import (
+    ColorICPConfig,
+    FeatureMatchConfig,
+    colored_icp,
+    fpfh_features,
+    ransac_feature_match,
+)
 
 reg = o3d.pipelines.registration
 
@@ -40,11 +48,6 @@ def evaluate(
     return PairResult.of(reg.evaluate_registration(source, target, max_corr, T), max_corr)
 
 
-def fpfh(pcd: o3d.geometry.PointCloud, voxel: float, radius_factor: float = 5.0) -> reg.Feature:
-    """FPFH features of a down-sampled cloud with normals (radius = factor x voxel, as Open3D's tutorial)."""
-    return reg.compute_fpfh_feature(pcd, o3d.geometry.KDTreeSearchParamHybrid(radius=voxel * radius_factor, max_nn=100))
-
-
 def global_ransac(
     source: o3d.geometry.PointCloud,
     target: o3d.geometry.PointCloud,
@@ -58,21 +61,9 @@ def global_ransac(
 ) -> PairResult:
     """FPFH feature-matching RANSAC (the paper's global registration), seeded for reproducibility."""
     max_corr = voxel * corr_factor
-    fs, ft = fpfh(source, voxel, radius_factor), fpfh(target, voxel, radius_factor)
-    o3d.utility.random.seed(int(seed))
-    result = reg.registration_ransac_based_on_feature_matching(
-        source,
-        target,
-        fs,
-        ft,
-        True,
-        max_corr,
-        reg.TransformationEstimationPointToPoint(False),
-        3,
-        [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(max_corr)],
-        reg.RANSACConvergenceCriteria(iterations, confidence),
-    )
-    return PairResult.of(result, max_corr)
+    cfg = FeatureMatchConfig(fpfh_radius_factor=radius_factor, max_iteration=iterations, confidence=confidence)
+    fs, ft = fpfh_features(source, voxel, cfg), fpfh_features(target, voxel, cfg)
+    return PairResult.of(ransac_feature_match(source, target, fs, ft, max_corr, seed=seed, config=cfg), max_corr)
 
 
 def _safe(run, init: np.ndarray, max_corr: float) -> PairResult:
@@ -98,43 +89,16 @@ def icp_colored(
     source, target, max_corr: float, init: np.ndarray, iterations: int = 30, lambda_geometric: float = 0.968
 ) -> PairResult:
     """Colored ICP (Park et al. 2017): photometric + geometric; needs colors on both and target normals."""
-    crit = reg.ICPConvergenceCriteria(1e-7, 1e-7, iterations)
-    est = reg.TransformationEstimationForColoredICP(lambda_geometric)
-    return _safe(lambda: reg.registration_colored_icp(source, target, max_corr, init, est, crit), init, max_corr)
+    cfg = ColorICPConfig(max_iteration=iterations, lambda_geometric=lambda_geometric, relative_fitness=1e-7,
+                         relative_rmse=1e-7)
+    out = colored_icp(source, target, max_corr, init, cfg)
+    return PairResult(T=out.T, fitness=out.fitness, rmse=out.rmse, max_corr=max_corr)
 
 
 def icp_generalized(source, target, max_corr: float, init: np.ndarray, iterations: int = 30) -> PairResult:
     crit = reg.ICPConvergenceCriteria(1e-7, 1e-7, iterations)
     est = reg.TransformationEstimationForGeneralizedICP()
     return _safe(lambda: reg.registration_generalized_icp(source, target, max_corr, init, est, crit), init, max_corr)
-
-
-def mean_spacing(pcd: o3d.geometry.PointCloud) -> float:
-    """d of the paper: the mean distance from each point to its nearest neighbour in the same cloud."""
-    dist = np.asarray(pcd.compute_nearest_neighbor_distance())
-    return float(dist.mean()) if dist.size else 0.0
-
-
-def overlap_only(
-    source: o3d.geometry.PointCloud,
-    target: o3d.geometry.PointCloud,
-    T: np.ndarray,
-) -> tuple[o3d.geometry.PointCloud, o3d.geometry.PointCloud]:
-    """The paper's temporary removal of non-overlapping points.
-
-    A source point is kept when the (transformed) target has a point within d_source of it, d being the
-    cloud's mean point spacing; likewise for the target. The clouds returned are for the final
-    point-to-plane step only; the full clouds are what get fused.
-    """
-    src_pts = np.asarray(source.points) @ T[:3, :3].T + T[:3, 3]
-    tgt_pts = np.asarray(target.points)
-    d_src, d_tgt = mean_spacing(source), mean_spacing(target)
-    near_src = cKDTree(tgt_pts).query(src_pts, k=1, distance_upper_bound=d_src)[0] <= d_src
-    near_tgt = cKDTree(src_pts).query(tgt_pts, k=1, distance_upper_bound=d_tgt)[0] <= d_tgt
-    return (
-        source.select_by_index(np.flatnonzero(near_src)),
-        target.select_by_index(np.flatnonzero(near_tgt)),
-    )
 
 
 def information(source, target, max_corr: float, T: np.ndarray) -> np.ndarray:

@@ -27,6 +27,7 @@ import open3d as o3d
 
 from common.geometry import invert, transform_error, transform_points
 from common.messages import RGBDFrame
+from services.registration.blocks import overlap_only
 from services.registration.cloud import (
     CloudError,
     FramePoints,
@@ -344,7 +345,7 @@ def _pair_paper(src: dict, tgt: dict, cfg: StaticConfig, seed: int) -> pw.PairRe
         T = pw.icp_colored(s, t, max_corr, T, cfg.local_iterations, cfg.color_lambda_geometric).T
         res = pw.icp_generalized(s, t, max_corr, T, cfg.local_iterations)
         T = res.T
-    s_ov, t_ov = pw.overlap_only(src["final"], tgt["final"], T)
+    s_ov, t_ov = overlap_only(src["final"], tgt["final"], T)
     if len(s_ov.points) >= 3 * 10 and len(t_ov.points) >= 3 * 10:
         res = pw.icp_point_to_plane(s_ov, t_ov, cfg.paper_final_voxel * 2.0, T, cfg.local_iterations)
     return res
