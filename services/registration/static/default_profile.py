@@ -1,6 +1,6 @@
 """The ``default`` profile's alignment: the arm's believed poses as the prior, refined pair by pair.
 
-Per pair (each scan against scan 0): dense RGB-D odometry from the prior at half resolution, checked
+Per pair (each scan against scan 0): dense RGB-D odometry from the prior (full-resolution image pyramid), checked
 (fitness, inlier RMSE, size of the correction); a pair that fails tries GICP from the prior, and only then
 global registration (FPFH RANSAC on the table-free clouds, refined, scored on the table-free clouds).
 Optional pose graph with the edges to scan 0 as the spanning tree. See docs/static-registration.md.
