@@ -16,7 +16,9 @@ aligning to the ground truth, footprint excluded, as ``bench dynamic``); the tar
 fallback on < 10 % of scans. The machine is shared: ``load_average`` is recorded before and after, and
 CPU seconds are the load-independent figure beside the wall.
 
-``--quick``: milk only. The sessions are written to a temporary folder and removed afterwards.
+``--quick``: milk only. The sessions are written to a temporary folder and removed afterwards; with
+``$OBJSCAN_BENCH_SESSION_DIR`` they are kept there and reused by the next run (``NAME_session``: the same
+deterministic recording), so a re-measure times only the CLI.
 """
 
 from __future__ import annotations
@@ -77,7 +79,7 @@ def oracle_chamfer(session: Path, out: Path, name: str) -> tuple[float, float]:
     for path in sorted((out / "views").glob("view_*.ply")):
         k = int(path.stem.split("_")[1])
         c = read_ply(path)
-        views.append(DynamicView(xyz=c.xyz, rgb=c.rgb, normals=c.normals, table=Plane(np.array([0.0, 0, 1]), 0.0),
+        views.append(DynamicView(xyz=c.xyz, rgb=c.rgb, normals=c.normals, table=Plane(normal=np.array([0.0, 0, 1]), center=np.zeros(3)),
                                  center=np.zeros(3), commanded_turn_deg=0.0, index=k,
                                  T_view0_view_true=T0 @ invert(_truth(session, k))))
     oracle = fuse(views, oracle_poses(views, gt), 0.001).xyz
@@ -85,12 +87,19 @@ def oracle_chamfer(session: Path, out: Path, name: str) -> tuple[float, float]:
     return _chamfer(np.asarray(model, dtype=float), gt), _chamfer(np.asarray(oracle, dtype=float), gt)
 
 
-def measure(name: str, tmp: Path, seed: int = 0) -> dict[str, Any]:
-    """One object: record the realistic session, reconstruct it with the CLI, read and score the outputs."""
+def session_for(name: str, folder: Path, seed: int = 0) -> Path:
+    """The object's realistic 12 x 3 session in ``folder`` (recorded now unless a complete one is there)."""
     from services.sim.scenario import simulated_views, write_session
 
-    session = write_session(tmp / f"{name}_session",
-                            simulated_views(name, views=12, scans_per_view=3, profile=PROFILE, seed=seed))
+    session = folder / f"{name}_session"
+    if (session / "session.json").is_file():
+        return session
+    return write_session(session, simulated_views(name, views=12, scans_per_view=3, profile=PROFILE, seed=seed))
+
+
+def measure(name: str, tmp: Path, sessions: Path, seed: int = 0) -> dict[str, Any]:
+    """One object: record the realistic session, reconstruct it with the CLI, read and score the outputs."""
+    session = session_for(name, sessions, seed)
     out = tmp / f"{name}_out"
     row: dict[str, Any] = {"object": name, **run_cli(session, out, name)}
     if row["returncode"] != 0 or not (out / "report.json").is_file():
@@ -120,8 +129,11 @@ def run(quick: bool = False) -> dict[str, Any]:
     """Every object's figures, then medians and the targets."""
     objects = OBJECTS[:1] if quick else OBJECTS
     load_before = os.getloadavg()
+    keep = os.environ.get("OBJSCAN_BENCH_SESSION_DIR")
     with tempfile.TemporaryDirectory(prefix="bench-reconstruct-") as tmp:
-        rows = [measure(name, Path(tmp)) for name in objects]
+        sessions = Path(keep) if keep else Path(tmp)
+        sessions.mkdir(parents=True, exist_ok=True)
+        rows = [measure(name, Path(tmp), sessions) for name in objects]
     ok = [r for r in rows if r.get("returncode") == 0 and "chamfer_mm" in r]
 
     def med(key: str) -> float | None:
