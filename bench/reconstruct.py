@@ -79,8 +79,9 @@ def oracle_chamfer(session: Path, out: Path, name: str) -> tuple[float, float]:
     for path in sorted((out / "views").glob("view_*.ply")):
         k = int(path.stem.split("_")[1])
         c = read_ply(path)
-        views.append(DynamicView(xyz=c.xyz, rgb=c.rgb, normals=c.normals, table=Plane(normal=np.array([0.0, 0, 1]), center=np.zeros(3)),
-                                 center=np.zeros(3), commanded_turn_deg=0.0, index=k,
+        views.append(DynamicView(xyz=c.xyz, rgb=c.rgb, normals=c.normals, index=k,
+                                 table=Plane(normal=np.array([0.0, 0, 1]), center=np.zeros(3)),
+                                 center=np.zeros(3), commanded_turn_deg=0.0,
                                  T_view0_view_true=T0 @ invert(_truth(session, k))))
     oracle = fuse(views, oracle_poses(views, gt), 0.001).xyz
     model = read_ply(out / "model.ply").xyz
