@@ -48,11 +48,11 @@ def _children_cpu() -> float:
     return ru.ru_utime + ru.ru_stime
 
 
-def run_cli(session: Path, out: Path, gt: str) -> dict[str, Any]:
+def run_cli(session: Path, out: Path, gt: str, env: dict[str, str]) -> dict[str, Any]:
     """Time ``objscan reconstruct`` as a subprocess: wall and CPU seconds of the child, its exit code."""
     cmd = [sys.executable, "-m", "services.cli", "reconstruct", str(session), "--out", str(out), "--gt", gt]
     c0, t0 = _children_cpu(), time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=os.environ.copy())
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
     wall = time.perf_counter() - t0
     return {"wall_s": wall, "cpu_s": _children_cpu() - c0, "returncode": proc.returncode,
             "stderr_tail": proc.stderr[-400:] if proc.returncode else ""}
@@ -98,11 +98,11 @@ def session_for(name: str, folder: Path, seed: int = 0) -> Path:
     return write_session(session, simulated_views(name, views=12, scans_per_view=3, profile=PROFILE, seed=seed))
 
 
-def measure(name: str, tmp: Path, sessions: Path, seed: int = 0) -> dict[str, Any]:
+def measure(name: str, tmp: Path, sessions: Path, env: dict[str, str], seed: int = 0) -> dict[str, Any]:
     """One object: record the realistic session, reconstruct it with the CLI, read and score the outputs."""
     session = session_for(name, sessions, seed)
     out = tmp / f"{name}_out"
-    row: dict[str, Any] = {"object": name, **run_cli(session, out, name)}
+    row: dict[str, Any] = {"object": name, **run_cli(session, out, name, env)}
     if row["returncode"] != 0 or not (out / "report.json").is_file():
         return row
     report = json.loads((out / "report.json").read_text())
@@ -129,12 +129,15 @@ def measure(name: str, tmp: Path, sessions: Path, seed: int = 0) -> dict[str, An
 def run(quick: bool = False) -> dict[str, Any]:
     """Every object's figures, then medians and the targets."""
     objects = OBJECTS[:1] if quick else OBJECTS
+    # every child gets the environment as it was when the bench started (importing bench.dynamic later sets
+    # OMP_NUM_THREADS=1 in this process; the CLI as a user runs it should not inherit that by accident)
+    env = os.environ.copy()
     load_before = os.getloadavg()
     keep = os.environ.get("OBJSCAN_BENCH_SESSION_DIR")
     with tempfile.TemporaryDirectory(prefix="bench-reconstruct-") as tmp:
         sessions = Path(keep) if keep else Path(tmp)
         sessions.mkdir(parents=True, exist_ok=True)
-        rows = [measure(name, Path(tmp), sessions) for name in objects]
+        rows = [measure(name, Path(tmp), sessions, env) for name in objects]
     ok = [r for r in rows if r.get("returncode") == 0 and "chamfer_mm" in r]
 
     def med(key: str) -> float | None:
@@ -156,6 +159,7 @@ def run(quick: bool = False) -> dict[str, Any]:
         "meets_static_target": (med("static_s_per_view") or 1e9) <= TARGET_STATIC_S_PER_VIEW,
         "meets_fallback_target": fallback < TARGET_FALLBACK_FRACTION,
         "meets_accuracy_target": bool(ok) and all(r["over_oracle"] <= TARGET_OVER_ORACLE for r in ok),
+        "omp_num_threads": env.get("OMP_NUM_THREADS", "unset"),
         "load_average_before": [round(x, 2) for x in load_before],
         "load_average_after": [round(x, 2) for x in os.getloadavg()],
         "per_object": {r["object"]: {k: (round(v, 4) if isinstance(v, float) else v) for k, v in r.items()
