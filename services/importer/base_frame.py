@@ -20,7 +20,7 @@ from services.importer.errors import ImportError_
 from services.registration.cloud import frame_points
 from services.registration.static.config import StaticConfig
 from services.registration.static.errors import NoTableError
-from services.registration.static.pipeline import centre_depth
+from services.registration.static.scans import centre_depth
 from services.registration.static.table import segment_table
 
 #: optical frame (x right, y down, z forward): an upright camera's "up" is -y

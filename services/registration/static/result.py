@@ -13,6 +13,8 @@ import numpy as np
 from common.geometry import transform_error
 from common.messages import Plane, PointCloud
 
+from .pairwise import PairResult
+
 
 @dataclass
 class ScanResult:
@@ -51,6 +53,18 @@ class ScanResult:
             "n_points": self.n_points,
             "T_base_camera": np.round(self.T_base_camera, 8).tolist(),
         }
+
+
+@dataclass
+class PairOutcome:
+    """One registered pair, as a profile hands it to the shared flow: ``T`` maps source camera points into
+    the target camera's frame; ``check`` is the pair's fitness / RMSE, ``verified`` whether it passed."""
+
+    T: np.ndarray
+    path: str  # "local" | "global" | "paper"
+    method: str  # "rgbd_odometry" | "icp" | "fpfh+icp" | "paper"
+    check: PairResult
+    verified: bool
 
 
 @dataclass
