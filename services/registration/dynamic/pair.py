@@ -471,9 +471,15 @@ def _register_fast(job: PairJob, cfg: PairConfig, scorer: _Scorer) -> PairResult
         _, T, name, (f, rmse, cf) = best
     detail: dict = {"tried": tried}
     if cfg.turn_only and path != "global":  # a global result means the object was re-seated: keep its tilt
-        tr = refine_turn(job.source, job.target, job.axis, job.center, T, cfg.turn_search)
+        import os
         detail["turn_only"] = {"tilt_dropped_deg": round(tilt_deg(T, job.axis), 3)}
-        T = tr.T
+        if os.environ.get("TURNX") == "proj":
+            from services.registration.dynamic.turn4dof import project_to_turn
+            T = project_to_turn(T, job.axis, job.center)
+        elif os.environ.get("TURNX") == "pw0":
+            T = refine_turn(job.source, job.target, job.axis, job.center, T, replace(cfg.turn_search, point_weight=0.0)).T
+        else:
+            T = refine_turn(job.source, job.target, job.axis, job.center, T, cfg.turn_search).T
         f, rmse, cf = scorer(T)
     return PairResult(job.index, job.source_view, job.target_view, T, f, rmse, cf, path, name, 0.0,
                       attempts=1, color_icp_failures=fails_total, detail=detail)
