@@ -15,6 +15,11 @@ from pathlib import Path
 from services.cli.cmd_scan import console
 
 
+def _turn_step(text: str) -> float | None:
+    """``--turn-step``: a number of degrees, or ``none`` (estimate each turn)."""
+    return None if text.strip().lower() == "none" else float(text)
+
+
 def register(sub) -> None:  # noqa: ANN001
     p = sub.add_parser("import", help="turn a fixed-camera RGB-D sequence into a session folder",
                        description=__doc__.split("\n\n")[1] if __doc__ else None)
@@ -23,8 +28,9 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--intrinsics", help="color intrinsics 'fx,fy,cx,cy' (pixels) or a JSON file; "
                                         "required for a folder without intrinsics.json")
     p.add_argument("--depth-scale", type=float, default=0.001, help="metres per depth unit (default 0.001)")
-    p.add_argument("--turn-step", type=float, default=None,
-                   help="degrees the object turns between frames; omit to estimate every turn")
+    p.add_argument("--turn-step", type=_turn_step, default=None,
+                   help="degrees the object turns between frames (a turntable's step); 'none' or omitted: "
+                        "estimate every turn")
     p.add_argument("--direction", choices=["ccw", "cw", "unknown"], default="unknown",
                    help="turn direction seen from above (default: unknown, both are tried)")
     p.add_argument("--every", type=int, default=1, help="keep one frame in N (default 1)")

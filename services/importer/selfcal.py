@@ -18,8 +18,11 @@ ICP from the 4-DoF turn search's result and projected to a turn (yaw about the t
 fixed camera sees one table, and an object standing on it can only turn and slide); the signed yaw of
 their composition is the loop error ``e(s)``. ``e`` is close to linear in ``s``: a secant search finds its
 zero inside ``scale_range``. The result is applied only when the sequence completes a turn (the turns
-found sum to at least ``min_turn_deg`` and the closing pair overlaps), the loop improves by at least
-``min_gain_deg`` and the pairs' overlap does not get worse; otherwise ``s = 1`` and the reason is reported.
+found sum to at least ``min_turn_deg`` and the closing pair overlaps), the loop is open by less than
+``max_loop_deg`` (more is a wrong pair, not a focal error) and closes better by at least ``min_gain_deg``;
+otherwise ``s = 1`` and the reason is reported. The pairs' mean overlap (fitness) is reported per scale but
+not used: it grows with ``s`` whatever the truth (a laterally shrunk cloud has more close neighbours; on
+the twin it rose from x 1 to x 1.03 with the right focal length), so it cannot tell the right scale.
 """
 
 from __future__ import annotations
@@ -51,7 +54,6 @@ class FocalSearchConfig:
     min_closing_fitness: float = 0.3  # and the last view must overlap the first
     max_loop_deg: float = 30.0  # a loop further off than this is a wrong pair (a face matched the wrong way)
     min_gain_deg: float = 1.0  # apply only when the loop closes better by at least this much
-    max_fitness_loss: float = 0.02  # ... and the pairs' mean overlap does not drop by more than this
     voxel: float = 0.002  # m
     icp_distances: tuple[float, ...] = (0.006, 0.003, 0.0015)  # m, coarse to fine
 
@@ -191,11 +193,6 @@ def calibrate_focal(views: list[DynamicView], T_base_camera: np.ndarray, searche
                   closing_fitness=base["closing_fitness"], evaluations=rounded, fx_before=fx)
     if gain < cfg.min_gain_deg:
         why = f"the loop closes within {gain:.2f} deg of the best scale already"
-        return FocalCalibration(1.0, False, why, loop_yaw_after_deg=base["loop_yaw_deg"], fx_after=fx,
-                                seconds=time.perf_counter() - t0, **common)
-    if best["mean_fitness"] < base["mean_fitness"] - cfg.max_fitness_loss:
-        why = f"the pairs overlap worse at scale {best['scale']:.3f} ({best['mean_fitness']:.3f} < " \
-              f"{base['mean_fitness']:.3f})"
         return FocalCalibration(1.0, False, why, loop_yaw_after_deg=base["loop_yaw_deg"], fx_after=fx,
                                 seconds=time.perf_counter() - t0, **common)
     s = best["scale"]

@@ -17,6 +17,7 @@ import numpy as np
 from PIL import Image
 
 from common.geometry import look_at
+from common.messages import Intrinsics
 from services.sim.catalogue import load_object
 from services.sim.errors import SimInputError
 from services.sim.render import RenderScene, TableSpec, render
@@ -46,24 +47,33 @@ class TurntableSpec:
             raise SimInputError("the camera must stand > 0.1 m away, above the table", code="bad_value")
 
 
-def render_turntable(spec: TurntableSpec, out_dir: str | Path, written_focal_scale: float = 1.0) -> dict:
-    """Render the sequence into ``out_dir``; returns the truth (intrinsics, camera pose, turns)."""
-    out = Path(out_dir)
-    (out / "rgb").mkdir(parents=True, exist_ok=True)
-    (out / "depth").mkdir(parents=True, exist_ok=True)
+def turntable_frames(spec: TurntableSpec) -> tuple[Intrinsics, np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
+    """Render the sequence: (intrinsics, T_base_camera, [(color, depth in mm)] per view)."""
     obj = load_object(spec.object_name)
     K = d435_intrinsics(spec.width, spec.height)
     centre = np.array([*default_object_pose()[:2, 3], 0.5 * float(obj.extent[2])])
     eye = centre + np.array([-spec.camera_distance, 0.0, spec.camera_height - centre[2]])
     T_base_camera = look_at(eye, centre)
     rng = np.random.default_rng(spec.seed)
-    turns = [spec.step_deg * k for k in range(spec.views)]
-    for k, yaw in enumerate(turns):
-        scene = RenderScene(obj, default_object_pose(yaw_deg=yaw), table=TableSpec())
+    frames = []
+    for k in range(spec.views):
+        scene = RenderScene(obj, default_object_pose(yaw_deg=spec.step_deg * k), table=TableSpec())
         res = render(scene, T_base_camera, K, noise=D435Noise() if spec.noise else None, rng=rng)
-        Image.fromarray(res.color).save(out / "rgb" / f"color_{k + 1}.png")
-        Image.fromarray(res.depth).save(out / "depth" / f"depth_{k + 1}.png")
+        frames.append((res.color, res.depth))
+    return K, T_base_camera, frames
+
+
+def render_turntable(spec: TurntableSpec, out_dir: str | Path, written_focal_scale: float = 1.0) -> dict:
+    """Render the sequence into ``out_dir`` (importer folder layout); returns the truth (intrinsics, camera
+    pose, turns)."""
+    out = Path(out_dir)
+    (out / "rgb").mkdir(parents=True, exist_ok=True)
+    (out / "depth").mkdir(parents=True, exist_ok=True)
+    K, T_base_camera, frames = turntable_frames(spec)
+    for k, (color, depth) in enumerate(frames):
+        Image.fromarray(color).save(out / "rgb" / f"color_{k + 1}.png")
+        Image.fromarray(depth).save(out / "depth" / f"depth_{k + 1}.png")
     written = {"fx": K.fx * written_focal_scale, "fy": K.fy * written_focal_scale, "cx": K.cx, "cy": K.cy}
     (out / "intrinsics.json").write_text(json.dumps(written))
     return {"intrinsics": K.as_dict(), "written_intrinsics": written, "T_base_camera": T_base_camera.tolist(),
-            "turns_deg": turns}
+            "turns_deg": [spec.step_deg * k for k in range(spec.views)]}
