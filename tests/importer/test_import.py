@@ -121,3 +121,13 @@ def test_a_realsense_recording_is_read_frame_by_frame(tmp_path):
     assert frames[0].intrinsics.fx == pytest.approx(SPEC.color_intrinsics.fx, rel=1e-5)
     assert frames[0].depth_scale == pytest.approx(SPEC.depth_scale, rel=1e-5)
     assert all(np.array_equal(f.T_base_camera, np.eye(4)) for f in frames)  # the pose comes from the table later
+
+
+def test_turn_step_none_means_estimate():
+    """``objscan import --turn-step none`` (a hand-turned object) is the same as leaving the step out."""
+    from services.cli.cmd_import import _turn_step
+
+    assert _turn_step("none") is None and _turn_step("None") is None
+    assert _turn_step("30") == 30.0 and _turn_step("-22.5") == -22.5
+    with pytest.raises(ValueError):
+        _turn_step("thirty")
