@@ -152,3 +152,18 @@ def test_the_turn_search_config_travels_to_workers():
                   axis=np.array([0.0, 0.0, 1.0]), config=cfg)
     back = pair_job_from_message(decode(encode(pair_job_message(job))))
     assert back.config == cfg and isinstance(back.config.turn_search, TurnSearchConfig)
+
+
+def test_a_prior_path_result_far_from_its_prior_is_not_a_turn():
+    """A result 87 degrees away from its prior (a box face matched onto its neighbour) fails the prior path's
+    check like a tumble does; the turn errors a prior carries pass."""
+    from common.geometry import make_transform, rotation_about_axis
+    from services.registration.dynamic.pair import is_turn_near_prior
+
+    axis, cfg = np.array([0.0, 0.0, 1.0]), PairConfig()
+    prior = known_turn(axis, np.array([0.5, 0.0, 0.1]), -40.0, (0.0, 0.0, 0.0))
+    for yaw, ok in ((15.0, True), (-30.0, True), (-87.5, False), (60.0, False)):
+        T = known_turn(axis, np.array([0.5, 0.0, 0.1]), yaw, (0.003, 0.0, 0.0)) @ prior
+        assert is_turn_near_prior(T, prior, axis, cfg) is ok, yaw
+    tipped = make_transform(rotation_about_axis([1.0, 0.0, 0.0], np.radians(12.0))) @ prior
+    assert not is_turn_near_prior(tipped, prior, axis, cfg)
