@@ -9,9 +9,15 @@ and the direction may be unknown (both are tried). Then ``objscan reconstruct SE
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 from services.cli.cmd_scan import console
+
+
+def _turn_step(text: str) -> float | None:
+    """``--turn-step``: a number of degrees, or ``none`` (estimate each turn)."""
+    return None if text.strip().lower() == "none" else float(text)
 
 
 def register(sub) -> None:  # noqa: ANN001
@@ -22,14 +28,18 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--intrinsics", help="color intrinsics 'fx,fy,cx,cy' (pixels) or a JSON file; "
                                         "required for a folder without intrinsics.json")
     p.add_argument("--depth-scale", type=float, default=0.001, help="metres per depth unit (default 0.001)")
-    p.add_argument("--turn-step", type=float, default=None,
-                   help="degrees the object turns between frames; omit to estimate every turn")
+    p.add_argument("--turn-step", type=_turn_step, default=None,
+                   help="degrees the object turns between frames (a turntable's step); 'none' or omitted: "
+                        "estimate every turn")
     p.add_argument("--direction", choices=["ccw", "cw", "unknown"], default="unknown",
                    help="turn direction seen from above (default: unknown, both are tried)")
     p.add_argument("--every", type=int, default=1, help="keep one frame in N (default 1)")
     p.add_argument("--object", default="imported", help="object name written to session.json")
     p.add_argument("--camera-up", default=None,
                    help="the world's up in the camera's optical frame 'x,y,z' (default 0,-1,0: an upright camera)")
+    p.add_argument("--no-focal-calibration", action="store_true",
+                   help="keep the given fx, fy even when a full-turn sequence's loop says they are off "
+                        "(default: self-calibrate them, docs/importing.md)")
     p.set_defaults(func=run)
 
 
@@ -45,6 +55,8 @@ def run(args) -> int:  # noqa: ANN001
             camera_up=tuple(float(v) for v in args.camera_up.split(",")))
         cfg = ImportConfig(turn_step_deg=args.turn_step, direction=args.direction, every=args.every,
                            depth_scale=args.depth_scale, object_name=args.object, base=base)
+        if args.no_focal_calibration:
+            cfg = replace(cfg, focal=replace(cfg.focal, enabled=False))
     except (ValueError, ImportError_) as exc:
         console.print(f"[red]error:[/red] {exc}")
         return 2
@@ -61,4 +73,7 @@ def run(args) -> int:  # noqa: ANN001
     console.print(f"session: {args.out}; {report['views']} views of {report['frames']} frames; turns {t['source']}, "
                   f"direction {t['direction']} ({t['direction_source']}); camera "
                   f"{report['base_frame']['camera_height_m'] * 100:.1f} cm above the table; {report['seconds']:.1f} s")
+    fc = report["focal_calibration"]
+    console.print(f"focal length: {'x ' + format(fc['scale'], '.4f') if fc['applied'] else 'kept'} "
+                  f"(fx {fc['fx_before']} -> {fc['fx_after']}): {fc['reason']}")
     return 0

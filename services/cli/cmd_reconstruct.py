@@ -72,4 +72,8 @@ def run(args) -> int:  # noqa: ANN001
     acc = report.get("accuracy", {})
     console.print(f"model: {model if model.is_file() else 'not built'}; {report['seconds_total']:.1f} s"
                   + (f"; chamfer {acc['chamfer_mm']:.3f} mm, F@2mm {acc.get('fscore_2mm', 0):.3f}" if acc else ""))
+    fc = report.get("focal_calibration")
+    if fc and fc.get("applied"):
+        console.print(f"intrinsics: fx, fy self-calibrated at import (x {fc['scale']:.4f}, fx {fc['fx_after']}): "
+                      f"{fc['reason']}")
     return 0 if model.is_file() else 1

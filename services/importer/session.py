@@ -20,6 +20,7 @@ from common.messages import Intrinsics
 from common.session_folder import write_scan, write_session
 from services.importer.base_frame import BaseFrameConfig, estimate_base_frame
 from services.importer.errors import ImportError_
+from services.importer.selfcal import FocalSearchConfig, calibrate_focal, scale_intrinsics
 from services.importer.sources import read_frames
 from services.importer.turns import DIRECTIONS, pair_searches, plan_turns
 from services.registration.dynamic.turn4dof import TurnSearchConfig
@@ -38,6 +39,7 @@ class ImportConfig:
     object_name: str = "imported"
     base: BaseFrameConfig = field(default_factory=BaseFrameConfig)
     turn_search: TurnSearchConfig = field(default_factory=TurnSearchConfig)
+    focal: FocalSearchConfig = field(default_factory=FocalSearchConfig)  # self-calibration of fx, fy
 
     def __post_init__(self) -> None:
         if self.direction not in DIRECTIONS:
@@ -79,6 +81,15 @@ def import_sequence(source: str | Path, out_dir: str | Path, intrinsics: Intrins
     plan = plan_turns(searches, cfg.turn_step_deg, cfg.direction)
     say({"stage": "turns", "source": plan.source, "direction": plan.direction,
          "median_turn_deg": round(float(np.median(np.abs(plan.pair_yaw_deg))), 2)})
+    calib = calibrate_focal(views, base.T_base_camera, searches, float(np.sum(plan.pair_yaw_deg)),
+                            kept[0].intrinsics, cfg.focal)
+    if calib.applied:  # the written frames carry the corrected intrinsics; the table is fitted again with them
+        for f in frames:
+            f.intrinsics = scale_intrinsics(f.intrinsics, calib.scale)
+        base = estimate_base_frame(frames, cfg.base, st)
+        for f in kept:
+            f.T_base_camera = base.T_base_camera.copy()
+    say({"stage": "focal", **calib.to_json()})
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     for k, f in enumerate(kept):
@@ -90,11 +101,13 @@ def import_sequence(source: str | Path, out_dir: str | Path, intrinsics: Intrins
         "skipped": skipped,
         "base_frame": base.to_json(),
         "turns": plan.to_json(),
+        "focal_calibration": calib.to_json(),
         "seconds": round(time.perf_counter() - t0, 3),
     }
     write_session(out, {
         "object": cfg.object_name,
         "profile": "imported",
+        "camera": "fixed",  # reconstruct: every view differs by a turn on the one table (pair.turn_only)
         "views": [{"index": k, "commanded_turn_deg": round(c, 4), "turn_source": plan.source}
                   for k, c in enumerate(plan.cumulative_deg)],
         "import": report,

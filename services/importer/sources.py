@@ -70,7 +70,10 @@ def read_recording(path: Path) -> Iterator[RGBDFrame]:
             except EndOfReplay:
                 break
             frame.seq = k
-            frame.T_base_camera = np.eye(4)
+            frame.T_base_camera = np.eye(4)  # the camera's own frame until the table gives base (base_frame.py)
+            # the backend marks a frame captured without a pose as unusable (pose_source "unknown"); here no
+            # pose is expected: the fixed camera's pose comes from the table, like a folder's frames
+            frame.meta = {k_: v for k_, v in (frame.meta or {}).items() if k_ != "pose_source"}
             yield frame
             k += 1
     except ReplayDataError as exc:

@@ -15,6 +15,7 @@ import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -84,6 +85,9 @@ def reconstruct(
             "views": views_report,
             "summary": _summary(views_report, time.perf_counter() - t_start),
         }
+        focal = session.data.get("import", {}).get("focal_calibration")
+        if focal is not None:  # an imported sequence whose focal length was self-calibrated (importer/selfcal)
+            report["focal_calibration"] = focal
         map_pairs = (lambda jobs: list(pool.map(register_pair, jobs))) if pool is not None else None
         report["model"] = run_dynamic_stage(results, session, out, report, progress, map_pairs=map_pairs,
                                             config=dynamic)
@@ -174,14 +178,17 @@ def run_dynamic_stage(
     order = sorted(results)
     views = [view_from_static(results[k], session.commanded_turn_deg(k), index=k) for k in order]
     say = (lambda stage, info: progress({"stage": f"dynamic:{stage}", **info})) if progress else None
+    cfg = config or DynamicConfig()
+    if cfg.pair.turn_only is None:  # a fixed camera sees one table: every view differs by a turn (pair.py)
+        cfg = replace(cfg, pair=replace(cfg.pair, turn_only=session.data.get("camera") == "fixed"))
     try:
-        model = build_model(views, config or DynamicConfig(), map_pairs=map_pairs, progress=say)
+        model = build_model(views, cfg, map_pairs=map_pairs, progress=say)
     except ObjscanError as exc:
         return {"error": {"code": exc.code, "message": exc.message, "detail": exc.detail},
                 "views_used": order, "seconds": round(time.perf_counter() - t0, 4)}
     ply = model.write_ply(Path(out_dir) / "model.ply")
     figures = model.to_json()
-    figures.update({"ply": str(ply.relative_to(out_dir)), "views_used": order,
+    figures.update({"ply": str(ply.relative_to(out_dir)), "views_used": order, "turn_only": cfg.pair.turn_only,
                     "seconds": round(time.perf_counter() - t0, 4)})
     report.setdefault("summary", {})["seconds_total"] = round(
         float(report.get("summary", {}).get("total_s", 0.0)) + figures["seconds"], 3)

@@ -96,6 +96,34 @@ def test_pair_registration_finds_a_large_turn_without_6dof(castard_views):
     assert all(t.get("tilt_deg", 0.0) < 10.0 for t in res.detail["tried"])  # a turn, not a tumble
 
 
+def test_turn_only_pairs_drop_the_tilt_and_keep_the_turn(castard_views):
+    """A fixed camera sees one table: with ``turn_only`` the result is a pure turn (no tilt about the table
+    normal), with the yaw and the centre's motion of the 6-DoF fit; without it the measured tilt stays."""
+    from common.geometry import make_transform, rotation_about_axis, yaw_deg_about
+    from services.registration.dynamic.pair import tilt_deg
+
+    views, base = castard_views
+    prep = preprocess(views)
+    target = prep.views[1].reduced
+    source, T_move = _moved_copy(target, prep.axis, prep.center, base.T_base_camera[:3, 3], 15.0, (0.004, 0.002, 0))
+    c = np.asarray(prep.center)
+    tip = make_transform(rotation_about_axis(np.cross(prep.axis, [1.0, 0.0, 0.0]), np.radians(2.0)))
+    tip[:3, 3] = c - tip[:3, :3] @ c  # tip the copy by 2 degrees about a horizontal line through the centre
+    source = source.transformed(tip)
+    results = {}
+    for turn_only in (False, True):
+        job = PairJob(index=0, source_view=1, target_view=0, source=source, target=target, center=prep.center,
+                      axis=prep.axis, config=PairConfig(turn_only=turn_only))
+        results[turn_only] = register_pair(job)
+    six, four = results[False], results[True]
+    assert 1.5 < tilt_deg(six.T, prep.axis) < 2.5  # the 6-DoF fit measures the tip
+    assert tilt_deg(four.T, prep.axis) < 1e-6 and four.detail["turn_only"]["tilt_dropped_deg"] > 1.5
+    assert abs(yaw_deg_about(prep.axis, four.T[:3, :3]) + 15.0) < 1.0  # the turn is kept
+    moved = lambda T: T[:3, :3] @ c + T[:3, 3]  # noqa: E731
+    assert np.linalg.norm(moved(four.T) - moved(six.T)) < 1e-6
+    assert "turn_only" not in six.detail
+
+
 def test_turn_search_recovers_a_known_yaw_and_shift_on_a_real_view(castard_views):
     """A real D415 view of the castard box and its copy moved by a known turn + shift (``_moved_copy``)."""
     views, base = castard_views
@@ -124,3 +152,18 @@ def test_the_turn_search_config_travels_to_workers():
                   axis=np.array([0.0, 0.0, 1.0]), config=cfg)
     back = pair_job_from_message(decode(encode(pair_job_message(job))))
     assert back.config == cfg and isinstance(back.config.turn_search, TurnSearchConfig)
+
+
+def test_a_prior_path_result_far_from_its_prior_is_not_a_turn():
+    """A result 87 degrees away from its prior (a box face matched onto its neighbour) fails the prior path's
+    check like a tumble does; the turn errors a prior carries pass."""
+    from common.geometry import make_transform, rotation_about_axis
+    from services.registration.dynamic.pair import is_turn_near_prior
+
+    axis, cfg = np.array([0.0, 0.0, 1.0]), PairConfig()
+    prior = known_turn(axis, np.array([0.5, 0.0, 0.1]), -40.0, (0.0, 0.0, 0.0))
+    for yaw, ok in ((15.0, True), (-30.0, True), (-87.5, False), (60.0, False)):
+        T = known_turn(axis, np.array([0.5, 0.0, 0.1]), yaw, (0.003, 0.0, 0.0)) @ prior
+        assert is_turn_near_prior(T, prior, axis, cfg) is ok, yaw
+    tipped = make_transform(rotation_about_axis([1.0, 0.0, 0.0], np.radians(12.0))) @ prior
+    assert not is_turn_near_prior(tipped, prior, axis, cfg)
