@@ -54,6 +54,7 @@ from services.orchestrator.planning import (
     scan_pose_candidates,
     turn_sequences,
 )
+from services.orchestrator.regrasp import RELOCATABLE_STEPS, relocated, relocation_shift, relocation_shifts
 from services.orchestrator.topple import topple_reason
 from services.session_store import SessionStore
 
@@ -113,7 +114,7 @@ class Acquisition:
                 self.j.state = State.SCAN.value
         self._plan: GraspPlanReply | None = None
         self.motion = ArmMotion(cell, self.config.turn, self.decide, self._journal_turn_intent,
-                                lambda direction: self._record_turn(self.view, direction))
+                                lambda seq: self._record_turn(self.view, seq.direction, relocation_shift(seq)))
         self.incremental = IncrementalModel(store, self.config.dynamic_config, cell,
                                             enabled=self.config.incremental, decide=self.decide)
 
@@ -307,7 +308,8 @@ class Acquisition:
         key = str(view)
         if key in self.j.scan_sets:
             return [np.asarray(T) for T in self.j.scan_sets[key]]
-        center, height = self._object_estimate(view - 1 if view > 0 else -1)
+        # the latest estimate: view k's own when a relocated set-down recorded where it now stands
+        center, height = self._object_estimate(view if view > 0 else -1)
         if view > 0:  # dry runs plan from the current posture: start them from the high home posture
             await self.motion.escape(center, height)
             try:
@@ -474,45 +476,67 @@ class Acquisition:
         failed_before = set(self.j.failed_grasps.get(str(k), []))
         await self.motion.escape(view.center, view.height)
         await self.cell.set_object_box(box_c, box_e)
-        for gi, grasp, seq in self._candidates(view.center, view.height):
-            signature = f"{grasp.kind}:{gi}:{seq.name}"
-            if attempts >= cfg.max_grasp_attempts or checks >= cfg.turn.max_checks:
-                break
-            if signature in failed_before:  # it slipped before: after a re-scan, try another one first
-                continue
-            # the whole pick-turn-place is planned and checked before the hand moves: an attempt that would
-            # stop half-way (a joint limit in the middle of the turn) would leave the object part-turned,
-            # and every later attempt would work on a view that no longer matches it
-            checks += 1
-            self.j.counters.grasp_checks += 1
-            try:
-                q_start = await self.motion.check_turn(seq, view.center)
-            except RemoteError as exc:
-                failures.append(f"{seq.name}:{exc.code}")
-                self._limits(k).setdefault("dry_run", []).append(exc.code)
-                self.decide("grasp pose not executable", grasp=gi, pose=seq.name, step=self.motion.step, code=exc.code,
-                            message=exc.message[:200], dry_run=True)
-                continue
-            attempts += 1
-            self.j.counters.grasp_attempts += 1
-            try:
-                await self.motion.execute_turn(grasp, seq, q_start, box_c, box_e, view.center, view.height)
-            except GraspFailed as exc:
-                self.j.counters.slips += 1
-                self.j.failed_grasps.setdefault(str(k), []).append(signature)
-                self._limits(k).setdefault("grasp", []).append(exc.message.split(":")[0][:40])
-                self.decide("grasp failed", grasp=gi, pose=seq.name, reason=exc.message)
+        direct = self._candidates(view.center, view.height)
+        late: list[tuple[int, Grasp, TurnPoses]] = []  # picks that were reachable; the turn or set-down was not
+        relocations = 0
+        shifts = relocation_shifts(view.center, cfg.turn.relocation)
+        for phase in ("direct", "relocated"):
+            if phase == "relocated":
+                if not late or not shifts:
+                    break
+                self.decide("trying relocated set-downs", chains=len(late),
+                            spots=[np.round(d[:2], 3).tolist() for d in shifts])
+                direct = [(gi, g, relocated(sq, d)) for gi, g, sq in late for d in shifts]
+            for gi, grasp, seq in direct:
+                signature = f"{grasp.kind}:{gi}:{seq.name}"
+                relocating = seq.carry_from is not None
+                if attempts >= cfg.max_grasp_attempts or (checks >= cfg.turn.max_checks and not relocating) \
+                        or relocations >= cfg.turn.relocation.max_checks:
+                    break
+                if signature in failed_before:  # it slipped before: after a re-scan, try another one first
+                    continue
+                # the whole pick-turn-place is planned and checked before the hand moves: an attempt that would
+                # stop half-way (a joint limit in the middle of the turn) would leave the object part-turned,
+                # and every later attempt would work on a view that no longer matches it
+                checks += 1
+                relocations += relocating
+                self.j.counters.grasp_checks += 1
+                try:
+                    q_start = await self.motion.check_turn(seq, view.center)
+                except RemoteError as exc:
+                    failures.append(f"{seq.name}:{exc.code}")
+                    self._limits(k).setdefault("dry_run", []).append(exc.code)
+                    self.decide("grasp pose not executable", grasp=gi, pose=seq.name, step=self.motion.step,
+                                code=exc.code, message=exc.message[:200], dry_run=True)
+                    if not relocating and self.motion.step in RELOCATABLE_STEPS:
+                        late.append((gi, grasp, seq))
+                    continue
+                attempts += 1
+                self.j.counters.grasp_attempts += 1
+                try:
+                    await self.motion.execute_turn(grasp, seq, q_start, box_c, box_e, view.center, view.height)
+                except GraspFailed as exc:
+                    self.j.counters.slips += 1
+                    self.j.failed_grasps.setdefault(str(k), []).append(signature)
+                    self._limits(k).setdefault("grasp", []).append(exc.message.split(":")[0][:40])
+                    self.decide("grasp failed", grasp=gi, pose=seq.name, reason=exc.message)
+                    self._plan = None
+                    self.j.grasp_mode = "auto"
+                    return await self._rescan(k, f"grasp failed: {exc.message}")
+                except RemoteError as exc:
+                    failures.append(f"{seq.name}:{exc.code}")
+                    self.decide("grasp pose not executable", grasp=gi, pose=seq.name, step=self.motion.step,
+                                code=exc.code, message=exc.message[:200])
+                    continue
+                shift = relocation_shift(seq)
+                if shift is not None:
+                    self.j.counters.regrasps += 1
+                    self.j.regrasps.setdefault(str(k), []).append(
+                        {"strategy": "relocated set-down", "pose": seq.name, "shift": np.round(shift, 4).tolist()})
+                self.decide("turned", grasp=gi, pose=seq.name, kind=grasp.kind, direction=seq.direction,
+                            relocated=None if shift is None else np.round(shift[:2], 3).tolist())
                 self._plan = None
-                self.j.grasp_mode = "auto"
-                return await self._rescan(k, f"grasp failed: {exc.message}")
-            except RemoteError as exc:
-                failures.append(f"{seq.name}:{exc.code}")
-                self.decide("grasp pose not executable", grasp=gi, pose=seq.name, step=self.motion.step, code=exc.code,
-                            message=exc.message[:200])
-                continue
-            self.decide("turned", grasp=gi, pose=seq.name, kind=grasp.kind, direction=seq.direction)
-            self._plan = None
-            return State.SCAN  # already journalled at the release (``_record_turn``)
+                return State.SCAN  # already journalled at the release (``_record_turn``)
         self._plan = None
         if self.j.grasp_mode != "top_down":
             self.j.grasp_mode = "top_down"
@@ -535,8 +559,14 @@ class Acquisition:
             self.j.holding = phase == "holding"
         self.store.save_journal(self.j.to_dict())
 
-    def _record_turn(self, k: int, direction: int) -> None:
-        """The object is released where the turn ends: the next view, its commanded turn, one journal write."""
+    def _record_turn(self, k: int, direction: int, shift: np.ndarray | None = None) -> None:
+        """The object is released where the turn ends: the next view, its commanded turn, one journal write.
+        A relocated set-down (``shift``) also gives the next view's expected centre: its scan poses are
+        placed around where the object now stands, not where it stood."""
+        if shift is not None and str(k) in self.j.centers:
+            c = np.asarray(self.j.centers[str(k)], float)
+            self.j.centers[str(k + 1)] = (c + np.asarray(shift, float)).tolist()
+            self.j.heights[str(k + 1)] = self.j.heights[str(k)]
         self.j.turns_deg.append(self.j.turns_deg[k] + direction * self.config.turn_deg)
         if self.j.turn_direction is None:
             self.j.turn_direction = direction
@@ -571,7 +601,7 @@ class Acquisition:
         if phase == "holding" and at_release:
             if closed:
                 await self.cell.gripper(opening, self.config.turn.gripper_force)
-            self._record_turn(k, int(intent["direction"]))
+            self._record_turn(k, int(intent["direction"]), intent.get("shift"))
             self.decide("turn had finished before the restart: recorded, not repeated", view=k + 1)
             return
         if closed:

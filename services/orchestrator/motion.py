@@ -19,6 +19,7 @@ from common.messages import Grasp
 from services.orchestrator.cell import Cell
 from services.orchestrator.config import TurnMotion
 from services.orchestrator.planning import TurnPoses
+from services.orchestrator.regrasp import relocation_shift
 
 
 class GraspFailed(ObjscanError):
@@ -32,12 +33,12 @@ class ArmMotion:
 
     ``decide(what, **detail)`` records a decision in the journal; ``on_intent(phase, **fields)`` journals
     where a turn stands before its next irreversible step (``closing``, ``holding``, ``None``: over);
-    ``on_turned(direction)`` records a finished turn (the object released where the turn ends).
+    ``on_turned(seq)`` records a finished turn (the object released where the turn ends).
     ``step`` names the move under way, for the decision that reports a failure.
     """
 
     def __init__(self, cell: Cell, motion: TurnMotion, decide: Callable[..., None],
-                 on_intent: Callable[..., None], on_turned: Callable[[int], None]):
+                 on_intent: Callable[..., None], on_turned: Callable[[TurnPoses], None]):
         self.cell = cell
         self.m = motion
         self.decide = decide
@@ -160,7 +161,7 @@ class ArmMotion:
                             box_e: np.ndarray, center: np.ndarray, height: float) -> None:
         """Pick, lift, turn about the table normal, set down, release, retreat. Raises on failure.
 
-        ``q_start`` is the checked branch above the pre-grasp (``_check_turn``); every later move is the
+        ``q_start`` is the checked branch above the pre-grasp (``check_turn``); every later move is the
         straight line the check planned. Motions before the gripper closes may fail harmlessly (RemoteError:
         the caller tries the next pose); a failure while holding sets the object back down where the hand
         is before re-raising.
@@ -180,7 +181,9 @@ class ArmMotion:
         self.step = "close"
         held_moves = [mv for mv in moves if mv.phase == "held"]
         release_T = np.asarray(held_moves[-1].target if held_moves else seq.above_pregrasp, float)
+        shift = relocation_shift(seq)
         self.on_intent("closing", direction=seq.direction, opening=opening,
+                       shift=None if shift is None else shift.tolist(),
                                   release_T=release_T.tolist(), center=np.asarray(center, float).tolist(),
                                   height=float(height))
         held = await c.gripper(0.0, m.gripper_force)
@@ -203,7 +206,7 @@ class ArmMotion:
             await self.escape(center, height)
             raise
         await c.gripper(opening, m.gripper_force)
-        self.on_turned(seq.direction)  # the turn happened: journalled before the retreat
+        self.on_turned(seq)  # the turn happened: journalled before the retreat
         self.step = "retreat"
         try:
             for mv in (mv for mv in moves if mv.phase == "released"):
@@ -211,7 +214,8 @@ class ArmMotion:
         except RemoteError as exc:  # the object is turned and released: escape as well as we can
             self.decide("retreat failed; escaping", code=exc.code)
             await self.escape(center, height)
-        await c.set_object_box(box_c, box_e)
+        # the object now stands where the set-down put it (moved by a relocated one)
+        await c.set_object_box(box_c if shift is None else box_c + shift, box_e)
 
     async def transit_joints(self, q: np.ndarray, speed: float) -> MoveResult:
         """Joint motion to a checked configuration; via the home posture when the direct one is refused."""

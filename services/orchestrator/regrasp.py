@@ -1,0 +1,73 @@
+"""Regrasp strategies: what the state machine tries when no pick-turn-place is executable where the object
+stands (issue 16 item 3). Plain functions over poses, so each is tested without a robot.
+
+Why they are needed: a thin box standing on edge (the HOPE cream cheese, 10.4 x 2.4 cm, 5.3 cm tall) has
+antipodal grasps only across its 2.4 cm thickness, which ties the hand's yaw to the box's. Whether the arm
+can take such a grasp depends on the box's yaw *relative to the line from the arm's base to it*: measured
+with the real kinematics (``tests/orchestrator/test_regrasp.py``), at 0.45 m every relative yaw is
+graspable except about 90 deg (long side across the line: the pads would close along it), and at 0.60 m
+a wider band fails. The object's world yaw must go round 360 deg; its relative yaw also depends on where it
+stands. So the strategy that frees the turn is a **relocated set-down**: the object is turned by the same
+commanded 30 deg and set down at another spot on the table (nearer the base, or at another azimuth around
+it), chosen so that the next view's grasp is again reachable. The dynamic registration stacks each view on
+its own centre (``registration/dynamic/preprocess.prerotation``), so a moved object registers as a turned one.
+
+Measured (real kinematics, +30 deg turns, ``/tmp``-free: ``tests/orchestrator/test_regrasp.py``): a direct
+turn works from relative yaws 120-30 deg (mod 180) and fails from 60 and 90; a set-down moved by an azimuth
+change of -30 deg (or +60) turns 60 into 120, so the box keeps going round while it hops between spots at
+0.45 m and azimuths 0, +-30 deg. Candidate spots (``relocation_shifts``) are tried shortest carry first,
+only for chains whose pick was reachable (the direct check failed at the turn or the set-down).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from services.orchestrator.config import RelocationConfig
+from services.orchestrator.planning import TurnPoses
+
+
+def relocation_shifts(center: np.ndarray, config: RelocationConfig) -> list[np.ndarray]:
+    """In-plane shifts (x, y, 0) from the object's centre to the candidate set-down spots, shortest carry
+    first (a spot on the object's own line nearer the base is usually that). Empty when disabled."""
+    if not config.enabled:
+        return []
+    c = np.asarray(center, float)[:2]
+    r = float(np.hypot(*c))
+    radii = {config.near_radius} | ({round(r, 3)} if config.near_radius < r <= config.max_radius else set())
+    out: list[np.ndarray] = []
+    for rr in sorted(radii):
+        for a in config.azimuths_deg:
+            target = rr * np.array([np.cos(np.radians(a)), np.sin(np.radians(a))])
+            shift = np.array([*(target - c), 0.0])
+            if np.linalg.norm(shift) >= config.min_shift and not any(np.allclose(shift, o) for o in out):
+                out.append(shift)
+    return sorted(out, key=lambda d: float(np.linalg.norm(d)))
+
+
+def relocated(seq: TurnPoses, shift: np.ndarray) -> TurnPoses:
+    """The same pick and turn, then a carry by ``shift`` (held, at the lift height) before the set-down:
+    the set-down, retreat and the pose above it move by ``shift``; the pick is unchanged."""
+    d = np.asarray(shift, float)
+
+    def moved(T: np.ndarray) -> np.ndarray:
+        out = np.asarray(T, float).copy()
+        out[:3, 3] += d
+        return out
+
+    tag = f"@{d[0]:+.2f},{d[1]:+.2f}"
+    return replace(seq, name=f"{seq.name}{tag}", carry_from=seq.turned_lifted, turned_lifted=moved(seq.turned_lifted),
+                   turned=moved(seq.turned), retreat=moved(seq.retreat), above_retreat=moved(seq.above_retreat))
+
+
+def relocation_shift(seq: TurnPoses) -> np.ndarray | None:
+    """The carry of a relocated chain (set-down minus where the turn ended), None for a direct one."""
+    if seq.carry_from is None:
+        return None
+    return np.asarray(seq.turned_lifted, float)[:3, 3] - np.asarray(seq.carry_from, float)[:3, 3]
+
+
+#: Steps of a direct chain whose failure a relocated set-down may cure: the pick was reachable.
+RELOCATABLE_STEPS = frozenset({"turn", "set down", "retreat", "up"})
