@@ -54,7 +54,14 @@ from services.orchestrator.planning import (
     scan_pose_candidates,
     turn_sequences,
 )
-from services.orchestrator.regrasp import RELOCATABLE_STEPS, relocated, relocation_shift, relocation_shifts
+from services.orchestrator.regrasp import (
+    RELOCATABLE_STEPS,
+    next_grasp_score,
+    relocated,
+    relocation_shift,
+    relocation_shifts,
+    yaw_tied,
+)
 from services.orchestrator.topple import topple_reason
 from services.session_store import SessionStore
 
@@ -464,6 +471,15 @@ class Acquisition:
             out += [(gi, grasp, sq) for sq in sequences if fixed is None or sq.direction == fixed]
         return out
 
+    def _ranked_for_next_turn(self, chains: list[tuple[int, Grasp, TurnPoses]], center: np.ndarray
+                              ) -> list[tuple[int, Grasp, TurnPoses]]:
+        """Chains whose set-down leaves a yaw-tied object well placed for the next turn first (good, fair,
+        poor: ``regrasp.next_grasp_score``); within a band, the given order (direct, then nearest spot)."""
+        def band(item: tuple[int, Grasp, TurnPoses]) -> int:
+            s = next_grasp_score(item[1], item[2], center, self.config.turn_deg)
+            return 0 if s >= 0.8 else 1 if s >= 0.45 else 2
+        return sorted(chains, key=band)
+
     async def turn(self) -> State:
         k = self.view
         if self._plan is None:  # resumed here: the plan is re-made from the registered view
@@ -480,13 +496,21 @@ class Acquisition:
         late: list[tuple[int, Grasp, TurnPoses]] = []  # picks that were reachable; the turn or set-down was not
         relocations = 0
         shifts = relocation_shifts(view.center, cfg.turn.relocation)
+        tied = yaw_tied(list(self._plan.grasps)) and bool(shifts)
+        if tied:  # a thin box: where it is set down decides whether its next grasp is reachable; look ahead
+            direct = self._ranked_for_next_turn(direct + [(gi, g, relocated(sq, d)) for d in shifts
+                                                          for gi, g, sq in direct], view.center)
+            self.decide("yaw-tied grasps: set-downs ranked for the next turn", chains=len(direct),
+                        spots=[np.round(view.center[:2] + d[:2], 3).tolist() for d in shifts])
         for phase in ("direct", "relocated"):
+            if phase == "relocated" and tied:
+                break
             if phase == "relocated":
                 if not late or not shifts:
                     break
                 self.decide("trying relocated set-downs", chains=len(late),
                             spots=[np.round(d[:2], 3).tolist() for d in shifts])
-                direct = [(gi, g, relocated(sq, d)) for gi, g, sq in late for d in shifts]
+                direct = [(gi, g, relocated(sq, d)) for d in shifts for gi, g, sq in late]  # nearest spot first
             for gi, grasp, seq in direct:
                 signature = f"{grasp.kind}:{gi}:{seq.name}"
                 relocating = seq.carry_from is not None
@@ -502,7 +526,7 @@ class Acquisition:
                 relocations += relocating
                 self.j.counters.grasp_checks += 1
                 try:
-                    q_start = await self.motion.check_turn(seq, view.center)
+                    q_start = await self.motion.check_turn(seq, view.center, float(grasp.width))
                 except RemoteError as exc:
                     failures.append(f"{seq.name}:{exc.code}")
                     self._limits(k).setdefault("dry_run", []).append(exc.code)

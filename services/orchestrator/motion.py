@@ -46,13 +46,15 @@ class ArmMotion:
         self.on_turned = on_turned
         self.step = ""
 
-    async def check_turn(self, seq: TurnPoses, center: np.ndarray) -> np.ndarray:
+    async def check_turn(self, seq: TurnPoses, center: np.ndarray, held_opening: float | None = None) -> np.ndarray:
         """Dry-run one pick-turn-place; returns the joints to stand in above the pre-grasp, or raises.
 
         The only free choice is the IK branch at ``above_pregrasp``: from there every move is a straight
         line whose dense IK continues the branch. The branches tried: the IK solution nearest the current
         joints, nearest each configured seed (home), and each one's other wrist branch. A branch whose
         wrist rolls run into their limits half-way through the turn is the failure this avoids.
+        ``held_opening`` (the grasp's width): the held moves are checked with the fingers closed that far, as
+        they will be (closed, a finger link reaches lower than open: on a short box it can meet the table).
         """
         from services.arm.kinematics import wrist_flip
 
@@ -81,7 +83,8 @@ class ArmMotion:
                     for mv in seq.straight_moves(center):
                         step = mv.step
                         q = (await self.cell.move("linear", target=mv.target, q=q, speed=m.approach_speed_scale,
-                                                  contact=mv.contact, dry_run=True)).q
+                                                  contact=mv.contact, dry_run=True,
+                                                  check_opening=held_opening if mv.phase == "held" else None)).q
                     return np.asarray(cand, float)
                 except RemoteError as exc:
                     if exc.code in ("estop_latched", "busy"):

@@ -137,7 +137,7 @@ def turn_sequences(grasp: Grasp, motion: TurnMotion, object_height: float) -> li
 def carry_line(start: np.ndarray, end: np.ndarray, step: float = 0.05) -> list[np.ndarray]:
     """Waypoints of a straight carry at constant orientation, at most ``step`` apart: each short line's
     dense IK continues the previous one's branch, where one long line can end on another branch."""
-    n = max(1, int(np.ceil(np.linalg.norm(end[:3, 3] - start[:3, 3]) / step)))
+    n = max(1, int(np.ceil(np.linalg.norm(end[:3, 3] - start[:3, 3]) / step - 1e-9)))
     out = []
     for i in range(1, n + 1):
         T = end.copy()

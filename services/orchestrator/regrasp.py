@@ -25,6 +25,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from common.messages import Grasp
 from services.orchestrator.config import RelocationConfig
 from services.orchestrator.planning import TurnPoses
 
@@ -67,6 +68,36 @@ def relocation_shift(seq: TurnPoses) -> np.ndarray | None:
     if seq.carry_from is None:
         return None
     return np.asarray(seq.turned_lifted, float)[:3, 3] - np.asarray(seq.carry_from, float)[:3, 3]
+
+
+def closing_azimuth_deg(grasp: Grasp) -> float:
+    """Direction (deg about the table normal, mod 180) the pads close along: contact to contact."""
+    d = np.asarray(grasp.contacts, float)
+    return float(np.degrees(np.arctan2(d[1, 1] - d[0, 1], d[1, 0] - d[0, 0]))) % 180.0
+
+
+def yaw_tied(grasps: list[Grasp], tolerance_deg: float = 20.0) -> bool:
+    """True when every grasp closes along one horizontal direction (a thin box: only across its thickness),
+    so the hand's yaw is tied to the object's and where it is set down decides the next grasp's reach."""
+    if not grasps:
+        return False
+    a = np.array([closing_azimuth_deg(g) for g in grasps])
+    diff = np.abs((a[:, None] - a[None, :] + 90.0) % 180.0 - 90.0)
+    return bool(diff.max() <= tolerance_deg)
+
+
+def next_grasp_score(grasp: Grasp, seq: TurnPoses, center: np.ndarray, turn_deg: float) -> float:
+    """How well placed a yaw-tied object will be for its *next* turn after this chain (0 bad .. 1 good).
+
+    The pads close along ``closing``; the arm reaches such a grasp well when that line runs across the line
+    from the base to the object (|sin| near 1) and not along it (0: the pads would close radially, measured
+    unreachable at 0.45 and 0.60 m). Scored at the set-down and one more turn on (the next view's turn),
+    taking the worse: a set-down that is fine now but leads into the bad band next is avoided."""
+    shift = relocation_shift(seq)
+    spot = np.asarray(center, float)[:2] + (0.0 if shift is None else shift[:2])
+    radial = np.degrees(np.arctan2(spot[1], spot[0]))
+    closing = closing_azimuth_deg(grasp) + seq.direction * turn_deg
+    return float(min(abs(np.sin(np.radians(closing + k * seq.direction * turn_deg - radial))) for k in (0, 1)))
 
 
 #: Steps of a direct chain whose failure a relocated set-down may cure: the pick was reachable.
