@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 
 from common.api import GraspPlanReply, ViewResult
-from common.messages import PointCloud
+from common.messages import Grasp, PointCloud
 from services.arm.kinematics import Kinematics
 from services.grasp.planner import plan_grasps
 from services.grasp.service import GraspService
 from services.orchestrator.config import AcquisitionConfig, ConfigError, RelocationConfig, TurnMotion
 from services.orchestrator.machine import Acquisition, State
-from services.orchestrator.planning import turn_sequences
-from services.orchestrator.regrasp import relocated, relocation_shift, relocation_shifts
+from services.orchestrator.planning import TurnPoses, turn_sequences
+from services.orchestrator.regrasp import next_grasp_score, relocated, relocation_shift, relocation_shifts, yaw_tied
 from services.session_store import SessionStore
 from tests.grasp.shapes import box, table_plane
 from tests.orchestrator import test_turn_reach as reach
@@ -113,3 +113,25 @@ def test_the_state_machine_turns_it_by_a_relocated_set_down(kin, tmp_path):
     assert [m for m in executed if m["error"]] == []  # checked in full: nothing fails while it is held
     turned = next(d for d in acq.j.decisions if d["what"] == "turned")
     assert turned["relocated"] == np.round(shift[:2], 3).tolist()
+
+
+def test_only_grasps_along_one_direction_are_yaw_tied():
+    _, _, thin = _plan(0.0)
+    assert yaw_tied(thin.to_messages())
+    _, _, milk = reach._plan("auto")  # a 7 x 7 cm carton: grasps across both pairs of faces
+    assert not yaw_tied(milk.to_messages())
+    assert not yaw_tied([])
+
+
+def test_the_next_turn_score_prefers_a_set_down_that_keeps_the_pads_off_the_radial_line():
+    """Pads closing along the base->object line (x) at (0.60, 0), turned +30 deg: set down in place they close
+    30 deg off it (next turn 60: fair); at azimuth -30 deg 60 then 90 off it (good); at +30 deg along it (bad)."""
+    g = Grasp(kind="frontal", contacts=np.array([[0.59, 0.0, 0.03], [0.61, 0.0, 0.03]]), width=0.02)
+    seq = TurnPoses("grasp", *([np.eye(4)] * 8), direction=1)
+    here = next_grasp_score(g, seq, CENTER, 30.0)
+    spot = {a: 0.45 * np.array([np.cos(np.radians(a)), np.sin(np.radians(a)), 0.0]) - CENTER for a in (30, -30)}
+    minus = next_grasp_score(g, relocated(seq, spot[-30]), CENTER, 30.0)
+    plus = next_grasp_score(g, relocated(seq, spot[30]), CENTER, 30.0)
+    assert here == pytest.approx(0.5) and minus == pytest.approx(np.sin(np.radians(60))) and plus < 0.05
+    mirrored = next_grasp_score(g, TurnPoses("grasp", *([np.eye(4)] * 8), direction=-1), CENTER, 30.0)
+    assert mirrored == pytest.approx(0.5)  # -30 deg then -60 deg off the line
