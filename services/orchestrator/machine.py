@@ -56,6 +56,7 @@ from services.orchestrator.planning import (
 )
 from services.orchestrator.regrasp import (
     RELOCATABLE_STEPS,
+    grasp_after,
     next_grasp_score,
     relocated,
     relocation_shift,
@@ -471,6 +472,64 @@ class Acquisition:
             out += [(gi, grasp, sq) for sq in sequences if fixed is None or sq.direction == fixed]
         return out
 
+    async def _attempt(self, k: int, gi: int, grasp: Grasp, seq: TurnPoses, q_start: np.ndarray,
+                       box: tuple[np.ndarray, np.ndarray], signature: str, failures: list[str]) -> State | None:
+        """Execute one checked pick-turn-place: the next state, or None when the arm refused a move before
+        the object was held (the caller tries the next chain)."""
+        view = self.store.load_view(k)
+        box_c, box_e = box
+        self.j.counters.grasp_attempts += 1
+        try:
+            await self.motion.execute_turn(grasp, seq, q_start, box_c, box_e, view.center, view.height)
+        except GraspFailed as exc:
+            self.j.counters.slips += 1
+            self.j.failed_grasps.setdefault(str(k), []).append(signature)
+            self._limits(k).setdefault("grasp", []).append(exc.message.split(":")[0][:40])
+            self.decide("grasp failed", grasp=gi, pose=seq.name, reason=exc.message)
+            self._plan = None
+            self.j.grasp_mode = "auto"
+            return await self._rescan(k, f"grasp failed: {exc.message}")
+        except RemoteError as exc:
+            failures.append(f"{seq.name}:{exc.code}")
+            self.decide("grasp pose not executable", grasp=gi, pose=seq.name, step=self.motion.step,
+                        code=exc.code, message=exc.message[:200])
+            return None
+        shift = relocation_shift(seq)
+        if shift is not None:
+            self.j.counters.regrasps += 1
+            self.j.regrasps.setdefault(str(k), []).append(
+                {"strategy": "relocated set-down", "pose": seq.name, "shift": np.round(shift, 4).tolist()})
+        self.decide("turned", grasp=gi, pose=seq.name, kind=grasp.kind, direction=seq.direction,
+                    relocated=None if shift is None else np.round(shift[:2], 3).tolist())
+        self._plan = None
+        return State.SCAN  # already journalled at the release (``_record_turn``)
+
+    async def _next_turn_possible(self, grasp: Grasp, seq: TurnPoses, center: np.ndarray) -> bool:
+        """Dry-run the turn after this one: the same grasp where ``seq`` leaves the object, turned again the
+        same way, directly or by a relocated set-down. A thin box set down where no next grasp reaches it
+        cannot be turned again (its pick fails whatever the set-down), so such a spot is avoided now."""
+        nxt = grasp_after(grasp, seq)
+        shift = relocation_shift(seq)
+        new_center = np.asarray(center, float) + (0.0 if shift is None else shift)
+        for nseq in turn_sequences(nxt, self.config.turn, float(self.j.heights.get(str(self.view), 0.1))):
+            if nseq.direction != seq.direction:
+                continue
+            try:
+                await self.motion.check_turn(nseq, new_center, float(grasp.width))
+                return True
+            except RemoteError as exc:
+                if exc.code in ("estop_latched", "busy"):
+                    raise
+                if self.motion.step in RELOCATABLE_STEPS:  # its pick reaches: a relocation may finish it
+                    for d in relocation_shifts(new_center, self.config.turn.relocation)[:2]:
+                        try:
+                            await self.motion.check_turn(relocated(nseq, d), new_center, float(grasp.width))
+                            return True
+                        except RemoteError as exc2:
+                            if exc2.code in ("estop_latched", "busy"):
+                                raise
+        return False
+
     def _ranked_for_next_turn(self, chains: list[tuple[int, Grasp, TurnPoses]], center: np.ndarray
                               ) -> list[tuple[int, Grasp, TurnPoses]]:
         """Chains whose set-down leaves a yaw-tied object well placed for the next turn first (good, fair,
@@ -497,6 +556,7 @@ class Acquisition:
         relocations = 0
         shifts = relocation_shifts(view.center, cfg.turn.relocation)
         tied = yaw_tied(list(self._plan.grasps)) and bool(shifts)
+        fallback: tuple[int, Grasp, TurnPoses, np.ndarray] | None = None  # passed its check, not the look-ahead
         if tied:  # a thin box: where it is set down decides whether its next grasp is reachable; look ahead
             direct = self._ranked_for_next_turn(direct + [(gi, g, relocated(sq, d)) for d in shifts
                                                           for gi, g, sq in direct], view.center)
@@ -535,32 +595,35 @@ class Acquisition:
                     if not relocating and self.motion.step in RELOCATABLE_STEPS:
                         late.append((gi, grasp, seq))
                     continue
+                if tied and k + 1 < cfg.views - 1:  # two-step look-ahead: will the next view turn too?
+                    if fallback is None:
+                        fallback = (gi, grasp, seq, q_start)
+                    if not await self._next_turn_possible(grasp, seq, view.center):
+                        self.decide("set-down leaves no executable next turn: trying another", grasp=gi,
+                                    pose=seq.name)
+                        continue
+                    try:  # the next chain's check took another branch: the start of this one is found again
+                        q_start = await self.motion.check_turn(seq, view.center, float(grasp.width))
+                    except RemoteError as exc:
+                        failures.append(f"{seq.name}:{exc.code}")
+                        continue
                 attempts += 1
-                self.j.counters.grasp_attempts += 1
-                try:
-                    await self.motion.execute_turn(grasp, seq, q_start, box_c, box_e, view.center, view.height)
-                except GraspFailed as exc:
-                    self.j.counters.slips += 1
-                    self.j.failed_grasps.setdefault(str(k), []).append(signature)
-                    self._limits(k).setdefault("grasp", []).append(exc.message.split(":")[0][:40])
-                    self.decide("grasp failed", grasp=gi, pose=seq.name, reason=exc.message)
-                    self._plan = None
-                    self.j.grasp_mode = "auto"
-                    return await self._rescan(k, f"grasp failed: {exc.message}")
-                except RemoteError as exc:
-                    failures.append(f"{seq.name}:{exc.code}")
-                    self.decide("grasp pose not executable", grasp=gi, pose=seq.name, step=self.motion.step,
-                                code=exc.code, message=exc.message[:200])
-                    continue
-                shift = relocation_shift(seq)
-                if shift is not None:
-                    self.j.counters.regrasps += 1
-                    self.j.regrasps.setdefault(str(k), []).append(
-                        {"strategy": "relocated set-down", "pose": seq.name, "shift": np.round(shift, 4).tolist()})
-                self.decide("turned", grasp=gi, pose=seq.name, kind=grasp.kind, direction=seq.direction,
-                            relocated=None if shift is None else np.round(shift[:2], 3).tolist())
-                self._plan = None
-                return State.SCAN  # already journalled at the release (``_record_turn``)
+                outcome = await self._attempt(k, gi, grasp, seq, q_start, (box_c, box_e), signature, failures)
+                if outcome is not None:
+                    return outcome
+        if fallback is not None and attempts < cfg.max_grasp_attempts:
+            gi, grasp, seq, _ = fallback
+            self.decide("no set-down keeps the next turn executable: taking the first executable one",
+                        grasp=gi, pose=seq.name)
+            try:
+                q_start = await self.motion.check_turn(seq, view.center, float(grasp.width))
+            except RemoteError as exc:
+                failures.append(f"{seq.name}:{exc.code}")
+            else:
+                outcome = await self._attempt(k, gi, grasp, seq, q_start, (box_c, box_e),
+                                              f"{grasp.kind}:{gi}:{seq.name}", failures)
+                if outcome is not None:
+                    return outcome
         self._plan = None
         if self.j.grasp_mode != "top_down":
             self.j.grasp_mode = "top_down"

@@ -25,7 +25,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from common.messages import Grasp
+from common.messages import Grasp, Pose
 from services.orchestrator.config import RelocationConfig
 from services.orchestrator.planning import TurnPoses
 
@@ -98,6 +98,17 @@ def next_grasp_score(grasp: Grasp, seq: TurnPoses, center: np.ndarray, turn_deg:
     radial = np.degrees(np.arctan2(spot[1], spot[0]))
     closing = closing_azimuth_deg(grasp) + seq.direction * turn_deg
     return float(min(abs(np.sin(np.radians(closing + k * seq.direction * turn_deg - radial))) for k in (0, 1)))
+
+
+def grasp_after(grasp: Grasp, seq: TurnPoses) -> Grasp:
+    """The same grasp on the object where ``seq`` leaves it: every pose (and the contacts) moved by the
+    object's rigid motion from the pick to the set-down (the turn, plus the carry of a relocated one). Its
+    ``turn*`` poses then turn about the new centre: the motion maps the old vertical axis onto the new one.
+    What the next view's planner will most likely offer again: the two-step look-ahead checks its chain."""
+    move = np.asarray(seq.turned, float) @ np.linalg.inv(np.asarray(seq.grasp, float))
+    contacts = np.asarray(grasp.contacts, float) @ move[:3, :3].T + move[:3, 3]
+    poses = {name: Pose.from_matrix(move @ p.matrix(), p.frame) for name, p in grasp.poses.items()}
+    return replace(grasp, contacts=contacts, poses=poses)
 
 
 #: Steps of a direct chain whose failure a relocated set-down may cure: the pick was reachable.

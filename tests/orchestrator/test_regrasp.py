@@ -89,7 +89,8 @@ def test_cream_cheese_at_30_deg_turns_only_with_a_relocated_set_down(kin):
     assert any(reach._executable(kin, relocated(s, np.array([-0.15, 0.0, 0.0]))) for s in seqs)
 
 
-def test_the_state_machine_turns_it_by_a_relocated_set_down(kin, tmp_path):
+@pytest.mark.parametrize("views", [3, pytest.param(12, marks=pytest.mark.slow)])  # 12: with the look-ahead
+def test_the_state_machine_turns_it_by_a_relocated_set_down(kin, tmp_path, views):
     """View 1 of a session turning +30 deg: the direct chains fail their dry runs, a relocated one passes and is
     executed; the next view's expected centre is where it was set down, the journal says so."""
     xyz, normals, plan = _plan(30.0)
@@ -99,7 +100,7 @@ def test_the_state_machine_turns_it_by_a_relocated_set_down(kin, tmp_path):
                                table=table_plane(), center=CENTER.copy(), height=CREAM_CHEESE[2],
                                scan_poses=np.zeros((0, 4, 4))))
     cell = ArmOnlyCell(np.array([0.597, -0.21, 0.198, -0.69, 1.176, 1.119]), kin)
-    acq = Acquisition(cell, store, AcquisitionConfig(views=3))  # type: ignore[arg-type]
+    acq = Acquisition(cell, store, AcquisitionConfig(views=views))  # type: ignore[arg-type]
     acq.j.update(view=1, state="turn", turns_deg=[0.0, 30.0], turn_direction=1,
                  centers={"1": CENTER.tolist()}, heights={"1": CREAM_CHEESE[2]})
     acq._plan = GraspPlanReply(grasps=plan.to_messages(), rejections={}, explanation=plan.explain(), seconds=0.0)
