@@ -99,8 +99,8 @@ class RelocationConfig:
     ``max_radius``) at the azimuths ``azimuths_deg`` about the base."""
 
     enabled: bool = True
-    near_radius: float = 0.45  # thin-box grasps reach every yaw but one band up to ~0.42-0.45 m
-    max_radius: float = 0.45  # spots also at the object's own distance when it stands farther, up to this
+    near_radius: float = 0.40  # a thin box standing on edge turns from every yaw at 0.38-0.42 m (regrasp.py)
+    max_radius: float = 0.40  # spots also at the object's own distance when it stands farther, up to this
     azimuths_deg: tuple[float, ...] = (0.0, 30.0, -30.0)
     max_checks: int = 40  # relocated chains dry-run per turn, on top of ``TurnMotion.max_checks``
     min_shift: float = 0.02  # m: a spot nearer than this to the object is where it already stands

@@ -57,7 +57,6 @@ from services.orchestrator.planning import (
 from services.orchestrator.regrasp import (
     RELOCATABLE_STEPS,
     grasp_after,
-    next_grasp_score,
     relocated,
     relocation_shift,
     relocation_shifts,
@@ -530,15 +529,6 @@ class Acquisition:
                                 raise
         return False
 
-    def _ranked_for_next_turn(self, chains: list[tuple[int, Grasp, TurnPoses]], center: np.ndarray
-                              ) -> list[tuple[int, Grasp, TurnPoses]]:
-        """Chains whose set-down leaves a yaw-tied object well placed for the next turn first (good, fair,
-        poor: ``regrasp.next_grasp_score``); within a band, the given order (direct, then nearest spot)."""
-        def band(item: tuple[int, Grasp, TurnPoses]) -> int:
-            s = next_grasp_score(item[1], item[2], center, self.config.turn_deg)
-            return 0 if s >= 0.8 else 1 if s >= 0.45 else 2
-        return sorted(chains, key=band)
-
     async def turn(self) -> State:
         k = self.view
         if self._plan is None:  # resumed here: the plan is re-made from the registered view
@@ -557,11 +547,12 @@ class Acquisition:
         shifts = relocation_shifts(view.center, cfg.turn.relocation)
         tied = yaw_tied(list(self._plan.grasps)) and bool(shifts)
         fallback: tuple[int, Grasp, TurnPoses, np.ndarray] | None = None  # passed its check, not the look-ahead
-        if tied:  # a thin box: where it is set down decides whether its next grasp is reachable; look ahead
-            direct = self._ranked_for_next_turn(direct + [(gi, g, relocated(sq, d)) for d in shifts
-                                                          for gi, g, sq in direct], view.center)
-            self.decide("yaw-tied grasps: set-downs ranked for the next turn", chains=len(direct),
-                        spots=[np.round(view.center[:2] + d[:2], 3).tolist() for d in shifts])
+        if tied:  # a thin box: where it is set down decides whether its next grasp is reachable
+            moved = [(gi, g, relocated(sq, d)) for d in shifts for gi, g, sq in direct]  # nearest spot first
+            far = float(np.hypot(*view.center[:2])) > cfg.turn.relocation.near_radius + cfg.turn.relocation.min_shift
+            direct = moved + direct if far else direct + moved  # farther than the near ring: bring it in first
+            self.decide("yaw-tied grasps: relocated set-downs tried " + ("first" if far else "after direct ones"),
+                        chains=len(direct), spots=[np.round(view.center[:2] + d[:2], 3).tolist() for d in shifts])
         for phase in ("direct", "relocated"):
             if phase == "relocated" and tied:
                 break

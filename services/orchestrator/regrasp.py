@@ -2,21 +2,21 @@
 stands (issue 16 item 3). Plain functions over poses, so each is tested without a robot.
 
 Why they are needed: a thin box standing on edge (the HOPE cream cheese, 10.4 x 2.4 cm, 5.3 cm tall) has
-antipodal grasps only across its 2.4 cm thickness, which ties the hand's yaw to the box's. Whether the arm
-can take such a grasp depends on the box's yaw *relative to the line from the arm's base to it*: measured
-with the real kinematics (``tests/orchestrator/test_regrasp.py``), at 0.45 m every relative yaw is
-graspable except about 90 deg (long side across the line: the pads would close along it), and at 0.60 m
-a wider band fails. The object's world yaw must go round 360 deg; its relative yaw also depends on where it
-stands. So the strategy that frees the turn is a **relocated set-down**: the object is turned by the same
-commanded 30 deg and set down at another spot on the table (nearer the base, or at another azimuth around
-it), chosen so that the next view's grasp is again reachable. The dynamic registration stacks each view on
-its own centre (``registration/dynamic/preprocess.prerotation``), so a moved object registers as a turned one.
+antipodal grasps only across its 2.4 cm thickness, which ties the hand's yaw to the box's (``yaw_tied``).
+Measured with the real kinematics and grasp planner (synthetic upright box, +30 and -30 deg turns, every
+30 deg of yaw): at 0.60 m on the base's x axis a turn is executable from 4 yaws of 12; at 0.45 m the yaws
+around "long side across the line from the base" (60-90 deg, 240-270 deg) fail at every azimuth tried
+(0, +-30 deg); at 0.38-0.42 m a top-down turn is executable from **every** yaw, both ways.
 
-Measured (real kinematics, +30 deg turns, ``/tmp``-free: ``tests/orchestrator/test_regrasp.py``): a direct
-turn works from relative yaws 120-30 deg (mod 180) and fails from 60 and 90; a set-down moved by an azimuth
-change of -30 deg (or +60) turns 60 into 120, so the box keeps going round while it hops between spots at
-0.45 m and azimuths 0, +-30 deg. Candidate spots (``relocation_shifts``) are tried shortest carry first,
-only for chains whose pick was reachable (the direct check failed at the turn or the set-down).
+So the strategy is a **relocated set-down**: the object is turned by the same commanded 30 deg and set
+down at another spot (``relocation_shifts``: 0.40 m from the base at azimuths 0, +-30 deg, shortest carry
+first), then scanned there. The dynamic registration stacks each view on its own centre
+(``registration/dynamic/preprocess.prerotation``), so a moved object registers as a turned one.
+- any object: relocated chains are tried when a direct chain's pick was reachable but its turn or
+  set-down was not (the dry run failed at ``RELOCATABLE_STEPS``);
+- a yaw-tied object farther than the near ring: relocated chains first (it is brought in on its first
+  turn), with a two-step look-ahead (``grasp_after``: the same grasp where the set-down leaves the
+  object must be turnable again).
 """
 
 from __future__ import annotations
@@ -84,20 +84,6 @@ def yaw_tied(grasps: list[Grasp], tolerance_deg: float = 20.0) -> bool:
     a = np.array([closing_azimuth_deg(g) for g in grasps])
     diff = np.abs((a[:, None] - a[None, :] + 90.0) % 180.0 - 90.0)
     return bool(diff.max() <= tolerance_deg)
-
-
-def next_grasp_score(grasp: Grasp, seq: TurnPoses, center: np.ndarray, turn_deg: float) -> float:
-    """How well placed a yaw-tied object will be for its *next* turn after this chain (0 bad .. 1 good).
-
-    The pads close along ``closing``; the arm reaches such a grasp well when that line runs across the line
-    from the base to the object (|sin| near 1) and not along it (0: the pads would close radially, measured
-    unreachable at 0.45 and 0.60 m). Scored at the set-down and one more turn on (the next view's turn),
-    taking the worse: a set-down that is fine now but leads into the bad band next is avoided."""
-    shift = relocation_shift(seq)
-    spot = np.asarray(center, float)[:2] + (0.0 if shift is None else shift[:2])
-    radial = np.degrees(np.arctan2(spot[1], spot[0]))
-    closing = closing_azimuth_deg(grasp) + seq.direction * turn_deg
-    return float(min(abs(np.sin(np.radians(closing + k * seq.direction * turn_deg - radial))) for k in (0, 1)))
 
 
 def grasp_after(grasp: Grasp, seq: TurnPoses) -> Grasp:

@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 
 from common.api import GraspPlanReply, ViewResult
-from common.messages import Grasp, PointCloud
+from common.messages import PointCloud
 from services.arm.kinematics import Kinematics
 from services.grasp.planner import plan_grasps
 from services.grasp.service import GraspService
 from services.orchestrator.config import AcquisitionConfig, ConfigError, RelocationConfig, TurnMotion
 from services.orchestrator.machine import Acquisition, State
-from services.orchestrator.planning import TurnPoses, turn_sequences
-from services.orchestrator.regrasp import next_grasp_score, relocated, relocation_shift, relocation_shifts, yaw_tied
+from services.orchestrator.planning import turn_sequences
+from services.orchestrator.regrasp import relocated, relocation_shift, relocation_shifts, yaw_tied
 from services.session_store import SessionStore
 from tests.grasp.shapes import box, table_plane
 from tests.orchestrator import test_turn_reach as reach
@@ -29,11 +29,11 @@ CENTER = np.array([0.60, 0.0, 0.0])
 
 def test_spots_nearer_the_base_first_and_only_inside_the_configured_ring():
     shifts = relocation_shifts(CENTER, RelocationConfig())
-    np.testing.assert_allclose(shifts[0], [-0.15, 0.0, 0.0], atol=1e-9)  # same line, at 0.45 m
+    np.testing.assert_allclose(shifts[0], [-0.20, 0.0, 0.0], atol=1e-9)  # same line, at 0.40 m
     targets = [CENTER[:2] + d[:2] for d in shifts]
     radii = sorted({round(float(np.hypot(*t)), 3) for t in targets})
     azimuths = sorted({round(float(np.degrees(np.arctan2(t[1], t[0])))) for t in targets})
-    assert radii == [0.45] and azimuths == [-30, 0, 30]
+    assert radii == [0.4] and azimuths == [-30, 0, 30]
     assert [round(float(np.linalg.norm(d)), 6) for d in shifts] == sorted(round(float(np.linalg.norm(d)), 6)
                                                                           for d in shifts)
     assert all(np.linalg.norm(d) >= 0.02 for d in shifts)  # never "relocate" to where it stands
@@ -122,17 +122,3 @@ def test_only_grasps_along_one_direction_are_yaw_tied():
     _, _, milk = reach._plan("auto")  # a 7 x 7 cm carton: grasps across both pairs of faces
     assert not yaw_tied(milk.to_messages())
     assert not yaw_tied([])
-
-
-def test_the_next_turn_score_prefers_a_set_down_that_keeps_the_pads_off_the_radial_line():
-    """Pads closing along the base->object line (x) at (0.60, 0), turned +30 deg: set down in place they close
-    30 deg off it (next turn 60: fair); at azimuth -30 deg 60 then 90 off it (good); at +30 deg along it (bad)."""
-    g = Grasp(kind="frontal", contacts=np.array([[0.59, 0.0, 0.03], [0.61, 0.0, 0.03]]), width=0.02)
-    seq = TurnPoses("grasp", *([np.eye(4)] * 8), direction=1)
-    here = next_grasp_score(g, seq, CENTER, 30.0)
-    spot = {a: 0.45 * np.array([np.cos(np.radians(a)), np.sin(np.radians(a)), 0.0]) - CENTER for a in (30, -30)}
-    minus = next_grasp_score(g, relocated(seq, spot[-30]), CENTER, 30.0)
-    plus = next_grasp_score(g, relocated(seq, spot[30]), CENTER, 30.0)
-    assert here == pytest.approx(0.5) and minus == pytest.approx(np.sin(np.radians(60))) and plus < 0.05
-    mirrored = next_grasp_score(g, TurnPoses("grasp", *([np.eye(4)] * 8), direction=-1), CENTER, 30.0)
-    assert mirrored == pytest.approx(0.5)  # -30 deg then -60 deg off the line
