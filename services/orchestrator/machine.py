@@ -550,8 +550,12 @@ class Acquisition:
         if tied:  # a thin box: where it is set down decides whether its next grasp is reachable
             moved = [(gi, g, relocated(sq, d)) for d in shifts for gi, g, sq in direct]  # nearest spot first
             far = float(np.hypot(*view.center[:2])) > cfg.turn.relocation.near_radius + cfg.turn.relocation.min_shift
-            direct = moved + direct if far else direct + moved  # farther than the near ring: bring it in first
-            self.decide("yaw-tied grasps: relocated set-downs tried " + ("first" if far else "after direct ones"),
+            # farther than the near ring: bring it in first; on the ring, top-down turns reach every yaw there
+            # (measured), so it moves again only once those have been tried too
+            direct = moved + direct if far else direct + moved if self.j.grasp_mode == "top_down" else direct
+            self.decide("yaw-tied grasps: relocated set-downs tried " + ("first" if far else "after direct ones"
+                                                                        if self.j.grasp_mode == "top_down" else
+                                                                        "after the top-down ones"),
                         chains=len(direct), spots=[np.round(view.center[:2] + d[:2], 3).tolist() for d in shifts])
         for phase in ("direct", "relocated"):
             if phase == "relocated" and tied:
