@@ -60,7 +60,6 @@ from services.orchestrator.regrasp import (
     relocated,
     relocation_shift,
     relocation_shifts,
-    wrist_flipped,
     yaw_tied,
 )
 from services.orchestrator.topple import topple_reason
@@ -549,7 +548,6 @@ class Acquisition:
         tied = yaw_tied(list(self._plan.grasps)) and bool(shifts)
         fallback: tuple[int, Grasp, TurnPoses, np.ndarray] | None = None  # passed its check, not the look-ahead
         if tied:  # a thin box: where it is set down decides whether its next grasp is reachable
-            direct = direct + [(gi, g, wrist_flipped(sq)) for gi, g, sq in direct]  # the wrist's other half turn
             moved = [(gi, g, relocated(sq, d)) for d in shifts for gi, g, sq in direct]  # nearest spot first
             far = float(np.hypot(*view.center[:2])) > cfg.turn.relocation.near_radius + cfg.turn.relocation.min_shift
             # farther than the near ring: bring it in first; on the ring, top-down turns reach every yaw there

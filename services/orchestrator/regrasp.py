@@ -86,20 +86,6 @@ def yaw_tied(grasps: list[Grasp], tolerance_deg: float = 20.0) -> bool:
     return bool(diff.max() <= tolerance_deg)
 
 
-#: The hand turned half a turn about its approach axis (the TCP frame's x): the pads swap sides.
-_HALF_TURN_ABOUT_APPROACH = np.diag([1.0, -1.0, -1.0, 1.0])
-
-
-def wrist_flipped(seq: TurnPoses) -> TurnPoses:
-    """The same chain with the hand turned 180 deg about its approach axis: a parallel-jaw grasp is the same
-    grasp with the pads swapped, but the wrist's last joint stands half a turn away, which can take it off
-    a joint limit the first one hit (the wrist's full yaw range, issue 16 item 3)."""
-    names = ("above_pregrasp", "pregrasp", "grasp", "lifted", "turned_lifted", "turned", "retreat", "above_retreat")
-    poses = {n: np.asarray(getattr(seq, n), float) @ _HALF_TURN_ABOUT_APPROACH for n in names}
-    carry = None if seq.carry_from is None else np.asarray(seq.carry_from, float) @ _HALF_TURN_ABOUT_APPROACH
-    return replace(seq, name=f"{seq.name}_flipped", carry_from=carry, **poses)
-
-
 def grasp_after(grasp: Grasp, seq: TurnPoses) -> Grasp:
     """The same grasp on the object where ``seq`` leaves it: every pose (and the contacts) moved by the
     object's rigid motion from the pick to the set-down (the turn, plus the carry of a relocated one). Its

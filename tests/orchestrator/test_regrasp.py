@@ -17,7 +17,7 @@ from services.grasp.service import GraspService
 from services.orchestrator.config import AcquisitionConfig, ConfigError, RelocationConfig, TurnMotion
 from services.orchestrator.machine import Acquisition, State
 from services.orchestrator.planning import turn_sequences
-from services.orchestrator.regrasp import relocated, relocation_shift, relocation_shifts, wrist_flipped, yaw_tied
+from services.orchestrator.regrasp import relocated, relocation_shift, relocation_shifts, yaw_tied
 from services.session_store import SessionStore
 from tests.grasp.shapes import box, table_plane
 from tests.orchestrator import test_turn_reach as reach
@@ -122,15 +122,3 @@ def test_only_grasps_along_one_direction_are_yaw_tied():
     _, _, milk = reach._plan("auto")  # a 7 x 7 cm carton: grasps across both pairs of faces
     assert not yaw_tied(milk.to_messages())
     assert not yaw_tied([])
-
-
-def test_a_wrist_flipped_chain_keeps_every_tcp_position_and_approach_and_swaps_the_pads():
-    _, _, plan = _plan(0.0)
-    seq = relocated(turn_sequences(plan.to_messages()[0], TurnMotion(), CREAM_CHEESE[2])[0], np.array([-0.2, 0, 0]))
-    flipped = wrist_flipped(seq)
-    for name in ("above_pregrasp", "grasp", "turned", "above_retreat", "carry_from"):
-        a, b = getattr(seq, name), getattr(flipped, name)
-        np.testing.assert_allclose(b[:3, 3], a[:3, 3])  # the TCP goes where it went
-        np.testing.assert_allclose(b[:3, 0], a[:3, 0], atol=1e-12)  # along the same approach
-        np.testing.assert_allclose(b[:3, 1], -a[:3, 1], atol=1e-12)  # the pads' closing line reversed
-    assert flipped.name.endswith("_flipped") and np.allclose(relocation_shift(flipped), relocation_shift(seq))
