@@ -94,6 +94,7 @@ def score_session(out: Path, *, seconds: float | None = None, status: str | None
             "dynamic_s": model.get("timings", {}).get("total_s"), "pairs": model.get("timings", {}).get("pairs"),
             "seconds_total": round(seconds, 1), "seconds_per_view": round(seconds / views, 1),
             "grasp_attempts": journal["counters"]["grasp_attempts"], "rescans": journal["counters"]["rescans"],
+            "regrasps": journal["counters"].get("regrasps", 0),  # relocated set-downs (orchestrator/regrasp.py)
             **{k: acc.get(k) for k in ("chamfer_mm", "accuracy_mm", "completeness_mm", "fscore_2mm", "fscore_5mm")},
             "unaligned_chamfer_mm": acc.get("unaligned", {}).get("chamfer_mm"),
             "configuration": model.get("configuration"),

@@ -32,7 +32,8 @@ class MoveRequest(Message):
     ``camera``. ``free_roll`` lets the gripper turn about its approach axis when the exact pose is out of
     reach. On a ``dry_run`` ``pose``/``linear`` move, ``q`` is the configuration to plan from (so a chain of
     motions can be checked before any of them runs); the reply then says where the motion would end. A real
-    ``pose``/``linear`` move with ``q`` is refused: it always starts where the arm is.
+    ``pose``/``linear`` move with ``q`` is refused: it always starts where the arm is. ``check_opening``
+    (dry runs) checks the motion with the fingers at that opening instead of the current one.
     """
 
     kind: str = "pose"
@@ -43,6 +44,9 @@ class MoveRequest(Message):
     free_roll: bool = False
     allow_object_contact: bool = False  # the pads may touch the object box (final grasp approach)
     dry_run: bool = False  # plan and check only: reachability without motion
+    # dry runs only: the finger opening (m) the collision check assumes, e.g. closed on the object for the
+    # held moves of a pick-turn-place checked before the gripper closes; negative: the fingers' current one
+    check_opening: float = -1.0
 
     def validate(self) -> None:
         if self.kind not in ("joints", "pose", "linear", "home"):

@@ -167,15 +167,18 @@ class ArmController:
             self.kinematics, self._start_q(q_start), T, self.config.limits, speed_scale, frame, self.config.line
         )
 
-    def check(self, trajectory: JointTrajectory, allow_object_contact: bool = False) -> dict:
+    def check(self, trajectory: JointTrajectory, allow_object_contact: bool = False,
+              opening: float | None = None) -> dict:
         """Full pre-motion check (envelope + collisions); raises on the first violation."""
         n_env = self.safety.check_trajectory(trajectory)
-        n_col = self.collision.check_trajectory(trajectory, self._opening, allow_object_contact)
+        n_col = self.collision.check_trajectory(trajectory, self._opening if opening is None else opening,
+                                                allow_object_contact)
         return {"envelope_samples": n_env, "collision_samples": n_col}
 
     # ------------------------------------------------------------------ moves
-    def _run(self, trajectory: JointTrajectory, allow_object_contact: bool, dry_run: bool) -> dict:
-        info = {"duration_s": float(trajectory.duration), **self.check(trajectory, allow_object_contact),
+    def _run(self, trajectory: JointTrajectory, allow_object_contact: bool, dry_run: bool,
+             opening: float | None = None) -> dict:
+        info = {"duration_s": float(trajectory.duration), **self.check(trajectory, allow_object_contact, opening),
                 "q_end": np.asarray(trajectory.q_end, dtype=np.float64).copy()}
         if dry_run:
             info["frames_end"] = self.kinematics.fk_frames(info["q_end"])  # still inside the motion lock
@@ -242,19 +245,21 @@ class ArmController:
         allow_object_contact: bool = False,
         dry_run: bool = False,
         q_start: np.ndarray | None = None,
+        check_opening: float | None = None,
     ) -> dict:
         """Joint-space motion putting ``frame`` (TCP by default) at a pose; ``roll`` in the reply when free.
 
         ``q_start`` (dry runs only) plans and checks the motion as if the arm stood there: a caller can check
         a whole chain of moves (pick, turn, place) before the first one runs. ``q_end`` in the reply is the
-        configuration the motion ends in.
+        configuration the motion ends in. ``check_opening`` (dry runs only): check with the fingers at that
+        opening, e.g. closed on the object for a held move checked before the gripper closes.
         """
-        self._dry_start(q_start, dry_run)
+        self._dry_start(q_start, dry_run, check_opening)
         if frame == "gripper":
             self.safety.check_tcp(T_base_gripper)
         with self._exclusive():
             traj, roll = self.plan_pose(T_base_gripper, speed_scale, free_roll, frame, q_start)
-            info = self._run(traj, allow_object_contact, dry_run)
+            info = self._run(traj, allow_object_contact, dry_run, check_opening)
             info["roll"] = roll
             return info
 
@@ -266,19 +271,23 @@ class ArmController:
         allow_object_contact: bool = False,
         dry_run: bool = False,
         q_start: np.ndarray | None = None,
+        check_opening: float | None = None,
     ) -> dict:
-        """Straight-line TCP motion (approach, lift, set down, retreat); ``q_start`` as in ``move_pose``."""
-        self._dry_start(q_start, dry_run)
+        """Straight-line TCP motion (approach, lift, set down, retreat); ``q_start``, ``check_opening`` as in
+        ``move_pose``."""
+        self._dry_start(q_start, dry_run, check_opening)
         if frame == "gripper":
             self.safety.check_tcp(T_base_gripper)
         with self._exclusive():
             return self._run(self.plan_linear(T_base_gripper, speed_scale, frame, q_start), allow_object_contact,
-                             dry_run)
+                             dry_run, check_opening)
 
     @staticmethod
-    def _dry_start(q_start: np.ndarray | None, dry_run: bool) -> None:
+    def _dry_start(q_start: np.ndarray | None, dry_run: bool, check_opening: float | None = None) -> None:
         if q_start is not None and not dry_run:
             raise BadCommand("a start configuration is only allowed on a dry run", code="bad_value")
+        if check_opening is not None and not dry_run:
+            raise BadCommand("a check opening is only allowed on a dry run", code="bad_value")
 
     def gripper(self, opening: float, force: float | None = None) -> dict:
         """Drive the fingers to ``opening`` (m) with at most ``force`` (N); blocks until reached or stalled.

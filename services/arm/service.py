@@ -79,16 +79,17 @@ class ArmService(Service):
         if not isinstance(msg, MoveRequest):
             raise InvalidRequest("expected a MoveRequest", detail={"got": type(msg).__name__})
         a = self.arm
+        opening = msg.check_opening if msg.check_opening >= 0.0 else None
         if msg.kind == "joints":
             info = await self.run_cpu(a.move_joints, msg.q, msg.speed_scale, msg.dry_run)
         elif msg.kind == "home":
             info = await self.run_cpu(a.home, msg.speed_scale, msg.dry_run)
         elif msg.kind == "pose":
             info = await self.run_cpu(a.move_pose, msg.target, msg.speed_scale, msg.free_roll, msg.frame,
-                                      msg.allow_object_contact, msg.dry_run, msg.q)
+                                      msg.allow_object_contact, msg.dry_run, msg.q, opening)
         else:
             info = await self.run_cpu(a.move_linear, msg.target, msg.speed_scale, msg.frame,
-                                      msg.allow_object_contact, msg.dry_run, msg.q)
+                                      msg.allow_object_contact, msg.dry_run, msg.q, opening)
         if msg.dry_run:
             return self._planned_result(info)
         return self._result(info)

@@ -101,9 +101,11 @@ class Cell:
 
     async def move(self, kind: str, *, target: np.ndarray | None = None, q: np.ndarray | None = None,
                    frame: str = "gripper", speed: float = 0.5, free_roll: bool = False,
-                   contact: bool = False, dry_run: bool = False) -> MoveResult:
+                   contact: bool = False, dry_run: bool = False, check_opening: float | None = None
+                   ) -> MoveResult:
         msg = MoveRequest(kind=kind, target=target, q=q, frame=frame, speed_scale=speed, free_roll=free_roll,
-                          allow_object_contact=contact, dry_run=dry_run)
+                          allow_object_contact=contact, dry_run=dry_run,
+                          check_opening=-1.0 if check_opening is None else float(check_opening))
         return _expect(await self._request(keys.arm(self.robot, "move"), msg, timeout=MOVE_TIMEOUT_S), MoveResult)
 
     async def gripper(self, opening: float, force: float = 30.0) -> GripperResult:

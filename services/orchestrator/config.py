@@ -93,6 +93,28 @@ class ScanGeometry:
 
 
 @dataclass
+class RelocationConfig:
+    """Where a relocated set-down may put the object (``services/orchestrator/regrasp.py``): spots at
+    ``near_radius`` from the arm's base (and at the object's own distance when farther, up to
+    ``max_radius``) at the azimuths ``azimuths_deg`` about the base."""
+
+    enabled: bool = True
+    near_radius: float = 0.40  # a thin box standing on edge turns from every yaw at 0.38-0.42 m (regrasp.py)
+    max_radius: float = 0.40  # spots also at the object's own distance when it stands farther, up to this
+    azimuths_deg: tuple[float, ...] = (0.0, 30.0, -30.0)
+    max_checks: int = 40  # relocated chains dry-run per turn, on top of ``TurnMotion.max_checks``
+    min_shift: float = 0.02  # m: a spot nearer than this to the object is where it already stands
+
+    def __post_init__(self) -> None:
+        _flag("turn.relocation.enabled", self.enabled)
+        _number("turn.relocation.near_radius", self.near_radius, 0.25, 0.9)
+        _number("turn.relocation.max_radius", self.max_radius, self.near_radius, 0.9)
+        self.azimuths_deg = tuple(_numbers("turn.relocation.azimuths_deg", self.azimuths_deg, -90.0, 90.0))
+        _number("turn.relocation.max_checks", self.max_checks, 1, 1000, integer=True)
+        _number("turn.relocation.min_shift", self.min_shift, 0.0, 0.5)
+
+
+@dataclass
 class TurnMotion:
     """The pick-turn-place sequence (paper II-B): lift, turn about the table normal, set down, retreat."""
 
@@ -108,8 +130,13 @@ class TurnMotion:
     # rolls mid-range, so its branch leaves room to turn either way
     branch_seeds: tuple[tuple[float, ...], ...] = ((0.0, -0.3, -0.9, 0.0, 1.2, 0.0),)
     max_checks: int = 48  # pick-turn-place chains dry-run per turn (each is a few cheap planning requests)
+    relocation: RelocationConfig = field(default_factory=RelocationConfig)  # regrasp: set down elsewhere
 
     def __post_init__(self) -> None:
+        if isinstance(self.relocation, dict):
+            self.relocation = RelocationConfig(**_known_keys(RelocationConfig, self.relocation, "turn.relocation"))
+        if not isinstance(self.relocation, RelocationConfig):
+            raise _fail("turn.relocation", "must be a map", self.relocation)
         for name, hi in (("lift", 0.5), ("clearance", 1.0), ("open_margin", 0.2), ("object_box_margin", 0.2)):
             _number(f"turn.{name}", getattr(self, name), 0.0, hi)
         for name in ("speed_scale", "approach_speed_scale"):

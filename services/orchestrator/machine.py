@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from common.api import GraspPlanReply, MoveResult, ViewResult
+from common.api import GraspPlanReply, ViewResult
 from common.errors import ObjscanError, RemoteError
 from common.log import event
 from common.messages import Grasp
@@ -43,7 +43,9 @@ from common.session_folder import scan_dir, view_dir
 from services.orchestrator.cell import Cell
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.incremental import IncrementalModel
+from services.orchestrator.journal import Journal
 from services.orchestrator.limits import name_limit
+from services.orchestrator.motion import ArmMotion, GraspFailed
 from services.orchestrator.planning import (
     TurnPoses,
     look_pose,
@@ -51,6 +53,14 @@ from services.orchestrator.planning import (
     radial_offset_deg,
     scan_pose_candidates,
     turn_sequences,
+)
+from services.orchestrator.regrasp import (
+    RELOCATABLE_STEPS,
+    grasp_after,
+    relocated,
+    relocation_shift,
+    relocation_shifts,
+    yaw_tied,
 )
 from services.orchestrator.topple import topple_reason
 from services.session_store import SessionStore
@@ -89,12 +99,6 @@ class AcquisitionFailed(ObjscanError):
     code = "acquisition_failed"
 
 
-class GraspFailed(ObjscanError):
-    """A grasp did not hold the object (slip, nothing between the pads)."""
-
-    code = "grasp_failed"
-
-
 class Acquisition:
     """One acquisition over a ``Cell``, persisted in a ``SessionStore``; ``run()`` drives it to the end."""
 
@@ -108,57 +112,51 @@ class Acquisition:
         self.stop_requested = asyncio.Event()
         journal = store.load_journal()
         self.resumed = journal is not None
-        self.j: dict[str, Any] = journal or {
-            "version": 1, "config": config.to_dict(), "state": State.LOCATE.value, "view": 0, "status": "running",
-            "turns_deg": [0.0], "centers": {}, "heights": {}, "rescans": {}, "grasp_mode": "auto",
-            "scan_sets": {}, "decisions": [], "timings_s": {}, "counters": {"captures": 0, "grasp_attempts": 0,
-                                                                             "grasp_checks": 0, "slips": 0,
-                                                                             "rescans": 0},
-            "started": time.time(), "simulated": None, "error": None,
-        }
+        self.j = Journal.from_dict(journal) if journal is not None else Journal(config=config.to_dict())
         if self.resumed:
-            self.config = AcquisitionConfig.from_dict(self.j["config"])
-            self.decide("resumed", state=self.j["state"], view=self.j["view"])
-            if self.j.get("pending_rescan"):  # killed while moving the old attempt aside: finish it
+            self.config = AcquisitionConfig.from_dict(self.j.config)
+            self.decide("resumed", state=self.j.state, view=self.j.view)
+            if self.j.pending_rescan:  # killed while moving the old attempt aside: finish it
                 self._finish_rescan()
-                self.j["state"] = State.SCAN.value
+                self.j.state = State.SCAN.value
         self._plan: GraspPlanReply | None = None
-        self._step = ""
+        self.motion = ArmMotion(cell, self.config.turn, self.decide, self._journal_turn_intent,
+                                lambda seq: self._record_turn(self.view, seq.direction, relocation_shift(seq)))
         self.incremental = IncrementalModel(store, self.config.dynamic_config, cell,
                                             enabled=self.config.incremental, decide=self.decide)
 
     # -------------------------------------------------------------------------------- bookkeeping
     @property
     def state(self) -> State:
-        return State(self.j["state"])
+        return State(self.j.state)
 
     @property
     def view(self) -> int:
-        return int(self.j["view"])
+        return int(self.j.view)
 
     def decide(self, what: str, **detail: Any) -> None:
         """Record a decision (and log it): the journal says why the run went the way it did."""
-        entry = {"t": round(time.time() - self.j["started"], 3), "state": self.j["state"], "view": self.j["view"],
+        entry = {"t": round(time.time() - self.j.started, 3), "state": self.j.state, "view": self.j.view,
                  "what": what, **{k: v for k, v in detail.items()}}
-        self.j["decisions"].append(entry)
-        fields = {"view": self.j["view"], **{k: v for k, v in detail.items() if not isinstance(v, (dict, list))}}
+        self.j.decisions.append(entry)
+        fields = {"view": self.j.view, **{k: v for k, v in detail.items() if not isinstance(v, (dict, list))}}
         event(log, what, **fields)
 
     def status(self) -> dict[str, Any]:
         views_done = sum(1 for k in range(self.config.views) if self.store.has_view(k))
-        return {"state": self.j["state"], "view": self.view, "views": self.config.views, "views_done": views_done,
-                "status": self.j["status"], "attempts": self.j["counters"]["grasp_attempts"],
-                "rescans": self.j["counters"]["rescans"], "last_error": self.j.get("error"),
-                "session": str(self.store.path), "elapsed_s": round(time.time() - self.j["started"], 1),
-                "model": self.j.get("model_path"), "accuracy": self.j.get("accuracy"),
-                "turns_deg": list(self.j["turns_deg"])}  # cumulative commanded turn per view (the live view)
+        return {"state": self.j.state, "view": self.view, "views": self.config.views, "views_done": views_done,
+                "status": self.j.status, "attempts": self.j.counters.grasp_attempts,
+                "rescans": self.j.counters.rescans, "last_error": self.j.error,
+                "session": str(self.store.path), "elapsed_s": round(time.time() - self.j.started, 1),
+                "model": self.j.model_path, "accuracy": self.j.accuracy,
+                "turns_deg": list(self.j.turns_deg)}  # cumulative commanded turn per view (the live view)
 
     def _persist(self) -> None:
-        self.store.save_journal(self.j)
-        turns = self.j["turns_deg"]
+        self.store.save_journal(self.j.to_dict())
+        turns = self.j.turns_deg
         views_done = sum(1 for k in range(len(turns)) if self.store.has_view(k) or self.store.has_scan(k, 0))
-        self.store.write_session_info(self.j["config"], max(views_done, 1), turns,
-                                      {"simulated": self.j.get("simulated")})
+        self.store.write_session_info(self.j.config, max(views_done, 1), turns,
+                                      {"simulated": self.j.simulated})
         self.on_status(self.status())
 
     def _go(self, nxt: State) -> None:
@@ -166,7 +164,7 @@ class Acquisition:
         # nxt == cur: the step already journalled its own outcome (a turn records the next view at release)
         if nxt != cur and nxt not in TERMINAL and nxt not in TRANSITIONS.get(cur, set()):
             raise AcquisitionFailed(f"internal error: no transition {cur.value} -> {nxt.value}")
-        self.j["state"] = nxt.value
+        self.j.state = nxt.value
         self._persist()
 
     # -------------------------------------------------------------------------------- main loop
@@ -175,19 +173,19 @@ class Acquisition:
                     State.PLAN_GRASP: self.plan_grasp, State.TURN: self.turn, State.MODEL: self.model}
         after_estop = self.state == State.STOPPED
         if after_estop:  # resuming after an e-stop
-            self.j["state"] = self.j.get("stopped_in", State.SCAN.value)
+            self.j.state = self.j.stopped_in or State.SCAN.value
         if self.state == State.DONE:  # nothing to do, but say so: a follower waits for a final status
             self.decide("resume of a finished session: nothing to do")
             self._persist()
             return self.status()
         if self.state == State.FAILED:  # the summary says "resume with ...": retry where it failed
             self._retry_after_failure()
-        self.j["status"] = "running"
+        self.j.status = "running"
         try:
             self._persist()
             if after_estop:
                 await self.cell.reset_estop()
-            if self.j.get("turn_intent"):  # before anything opens the gripper: it may hold the object
+            if self.j.turn_intent:  # before anything opens the gripper: it may hold the object
                 await self._recover_turn()
             await self._prepare_cell()
             while self.state not in TERMINAL:
@@ -196,13 +194,13 @@ class Acquisition:
                 state = self.state
                 t0 = time.perf_counter()
                 nxt = await handlers[state]()
-                self.j["timings_s"][state.value] = round(self.j["timings_s"].get(state.value, 0.0)
+                self.j.timings_s[state.value] = round(self.j.timings_s.get(state.value, 0.0)
                                                          + time.perf_counter() - t0, 3)
                 self._go(nxt)
-            self.j["status"] = "done"
+            self.j.status = "done"
         except asyncio.CancelledError:
-            self.j["stopped_in"] = self.j["state"]
-            self.j["state"], self.j["status"] = State.STOPPED.value, "stopped"
+            self.j.stopped_in = self.j.state
+            self.j.state, self.j.status = State.STOPPED.value, "stopped"
             self.decide("stopped", reason="stop requested")
         except ObjscanError as exc:
             await self._fail(exc.code, exc.message)
@@ -224,14 +222,14 @@ class Acquisition:
             return
         except OSError as exc:
             code = "disk_full" if exc.errno in (errno.ENOSPC, errno.EDQUOT) else "io_error"
-            if self.j["status"] != "failed":
-                self.j["error"] = {"code": code, "message": f"{type(exc).__name__}: {exc}", "state": self.j["state"]}
-                self.j["state"], self.j["status"] = State.FAILED.value, "failed"
+            if self.j.status != "failed":
+                self.j.error = {"code": code, "message": f"{type(exc).__name__}: {exc}", "state": self.j.state}
+                self.j.state, self.j.status = State.FAILED.value, "failed"
             else:
-                self.j["error"]["persist_error"] = f"{type(exc).__name__}: {exc}"
+                self.j.error["persist_error"] = f"{type(exc).__name__}: {exc}"
             self.decide("could not write the session folder", code=code)
         try:
-            self.store.save_journal(self.j, last_resort=True)
+            self.store.save_journal(self.j.to_dict(), last_resort=True)
         except OSError as exc:
             event(log, "the journal could not be written", logging.ERROR, error=repr(exc))
         self.on_status(self.status())
@@ -239,37 +237,37 @@ class Acquisition:
     def _retry_after_failure(self) -> None:
         """Resume a failed session from the state it failed in, with a fresh re-scan budget for that view
         (the arm was parked, gripper open, when it failed: nothing is held)."""
-        err = self.j.get("error") or {}
+        err = self.j.error or {}
         state = err.get("state") if err.get("state") in {s.value for s in State} - {s.value for s in TERMINAL} \
             else State.SCAN.value
-        self.j["state"] = state
-        self.j["rescans"].pop(str(self.view), None)
-        self.j.setdefault("previous_errors", []).append(err)
-        self.j["error"] = None
+        self.j.state = state
+        self.j.rescans.pop(str(self.view), None)
+        self.j.previous_errors.append(err)
+        self.j.error = None
         self.decide("resumed after failure", state=state, previous=err.get("code"))
 
     async def _fail(self, code: str, message: str) -> None:
         """End the session ``failed`` with the reason in the journal, and park the arm."""
-        self.j["error"] = {"code": code, "message": message, "state": self.j["state"]}
-        self.j["state"], self.j["status"] = State.FAILED.value, "failed"
+        self.j.error = {"code": code, "message": message, "state": self.j.state}
+        self.j.state, self.j.status = State.FAILED.value, "failed"
         self.decide("failed", code=code, message=message)
         await self._park()
 
     async def _prepare_cell(self) -> None:
         """First start: reset the twin to this session's object/profile/seed (sim cells only)."""
-        if self.j.get("simulated") is None:
+        if self.j.simulated is None:
             try:
                 x, y = self.config.workspace_center
                 await self.cell.sim("reset", object=self.config.object, profile=self.config.profile,
                                     seed=self.config.seed, x=float(x), y=float(y), physics=self.config.physics)
-                self.j["simulated"] = True
+                self.j.simulated = True
                 if self.config.force_first_slip:
                     await self.cell.sim("force_slip")
             except ObjscanError as exc:
                 if exc.code not in ("unavailable", "timeout"):
                     raise
-                self.j["simulated"] = False
-            self.decide("cell ready", simulated=self.j["simulated"])
+                self.j.simulated = False
+            self.decide("cell ready", simulated=self.j.simulated)
         await self.cell.gripper(0.1, self.config.turn.gripper_force)
 
     async def _park(self) -> None:
@@ -289,7 +287,7 @@ class Acquisition:
         T = look_pose(self._workspace_center(), self.config.scan)
         await self.cell.move("pose", target=T, frame="camera", speed=0.6)
         frame = await self.cell.capture(self.config.width, self.config.height)
-        self.j["counters"]["captures"] += 1
+        self.j.counters.captures += 1
         from common.session_folder import write_scan
 
         write_scan(self.store.path / "locate", 0, 0, frame)
@@ -299,14 +297,14 @@ class Acquisition:
         return State.SCAN
 
     def _remember_object(self, view: int, result: ViewResult) -> None:
-        self.j["centers"][str(view)] = np.asarray(result.center, float).tolist()
-        self.j["heights"][str(view)] = float(result.height)
+        self.j.centers[str(view)] = np.asarray(result.center, float).tolist()
+        self.j.heights[str(view)] = float(result.height)
 
     def _object_estimate(self, view: int) -> tuple[np.ndarray, float]:
         """Best current estimate of the object's footprint centre and height (latest registered view)."""
         for k in range(view, -2, -1):
-            if str(k) in self.j["centers"]:
-                return np.asarray(self.j["centers"][str(k)]), float(self.j["heights"][str(k)])
+            if str(k) in self.j.centers:
+                return np.asarray(self.j.centers[str(k)]), float(self.j.heights[str(k)])
         return self._workspace_center(), 0.1
 
     def _workspace_center(self) -> np.ndarray:
@@ -315,11 +313,12 @@ class Acquisition:
 
     async def _reachable_scan_set(self, view: int) -> list[np.ndarray]:
         key = str(view)
-        if key in self.j["scan_sets"]:
-            return [np.asarray(T) for T in self.j["scan_sets"][key]]
-        center, height = self._object_estimate(view - 1 if view > 0 else -1)
+        if key in self.j.scan_sets:
+            return [np.asarray(T) for T in self.j.scan_sets[key]]
+        # the latest estimate: view k's own when a relocated set-down recorded where it now stands
+        center, height = self._object_estimate(view if view > 0 else -1)
         if view > 0:  # dry runs plan from the current posture: start them from the high home posture
-            await self._escape(center, height)
+            await self.motion.escape(center, height)
             try:
                 await self.cell.move("home", speed=0.6)
             except RemoteError as exc:
@@ -332,7 +331,7 @@ class Acquisition:
             except RemoteError as exc:
                 reasons.append(exc.code)
                 continue
-            self.j["scan_sets"][key] = [T.tolist() for T in candidate]
+            self.j.scan_sets[key] = [T.tolist() for T in candidate]
             return candidate
         raise AcquisitionFailed("no reachable set of scan poses around the object",
                                 detail={"center": center.tolist(), "reasons": reasons[:6]})
@@ -343,11 +342,11 @@ class Acquisition:
         for j, T in enumerate(poses):
             if self.store.has_scan(k, j):
                 continue  # captured before a restart: never capture twice
-            moved = await self._transit(T, "camera", 0.6)
+            moved = await self.motion.transit(T, "camera", 0.6)
             frame = await self.cell.capture(self.config.width, self.config.height)
-            self.j["counters"]["captures"] += 1
+            self.j.counters.captures += 1
             self.store.save_scan(k, j, frame, {"joints": {"position": moved.q.tolist()}, "view": k, "scan": j,
-                                               "commanded_turn_deg": self.j["turns_deg"][k]})
+                                               "commanded_turn_deg": self.j.turns_deg[k]})
             self._persist()
         return State.REGISTER
 
@@ -360,7 +359,7 @@ class Acquisition:
             except RemoteError as exc:
                 self.decide("static registration failed", code=exc.code, message=exc.message)
                 return await self._rescan(k, f"registration failed: {exc.code}")
-            reason = (topple_reason(self.j["heights"].get(str(k - 1)), float(result.height),
+            reason = (topple_reason(self.j.heights.get(str(k - 1)), float(result.height),
                                     self.config.topple_height_tol_m, self.config.topple_height_rel, k)
                       if k > 0 else None)
             if reason is not None:
@@ -369,70 +368,70 @@ class Acquisition:
             self._remember_object(k, result)
             self.decide("view registered", points=len(result.cloud),
                         seconds=result.figures.get("timings_s", {}).get("total"))
-        self.incremental.view_ready(k, self.j["turns_deg"])  # pair k-1 -> k in the background, never awaited here
+        self.incremental.view_ready(k, self.j.turns_deg)  # pair k-1 -> k in the background, never awaited here
         if k >= self.config.views - 1:
             return State.MODEL
         return State.PLAN_GRASP
 
     def _limits(self, k: int) -> dict[str, Any]:
         """What stood in the way at view ``k`` (planner rejections, dry-run codes, grasp failures)."""
-        return self.j.setdefault("limits", {}).setdefault(str(k), {})
+        return self.j.limits_of(k)
 
     def _restart_after_topple(self, k: int, reason: str, result: ViewResult) -> State:
         """The object toppled before view ``k``: set views 0..k aside (kept on disk) and scan again from
         view 0 where it now lies, so no view of the old resting pose is fused with the new one."""
-        n = int(self.j.get("topple_restarts", 0)) + 1
+        n = self.j.topple_restarts + 1
         if n > self.config.max_topple_restarts:
             raise AcquisitionFailed(f"view {k}: {reason}; it toppled again after {n - 1} restart(s) of the views: "
                                     "giving up (the object does not stay standing after a set-down)",
                                     detail={"view": k, "restarts": n - 1})
-        self.j["topple_restarts"] = n
-        self.j["counters"]["topple_restarts"] = n
+        self.j.topple_restarts = n
+        self.j.counters.topple_restarts = n
         for v in range(k + 1):
             src = view_dir(self.store.path, v)
             if src.exists():
                 shutil.move(str(src), str(src.with_name(f"{src.name}_toppled{n}")))
-        self.j.update(view=0, turns_deg=[0.0], scan_sets={}, rescans={}, grasp_mode="auto", failed_grasps={},
-                      centers={}, heights={})
-        self.j.pop("turn_direction", None)
+        self.j.view, self.j.turns_deg, self.j.scan_sets, self.j.rescans = 0, [0.0], {}, {}
+        self.j.grasp_mode, self.j.failed_grasps, self.j.centers, self.j.heights = "auto", {}, {}, {}
+        self.j.turn_direction = None
         self._remember_object(-1, result)
         self._plan = None
         self.decide("object toppled: restarting the views from where it lies", reason=reason, restart=n)
         return State.SCAN
 
     async def _rescan(self, k: int, reason: str) -> State:
-        n = int(self.j["rescans"].get(str(k), 0)) + 1
+        n = int(self.j.rescans.get(str(k), 0)) + 1
         if n > self.config.max_rescans:
-            lim = self.j.get("limits", {}).get(str(k), {})
+            lim = self.j.limits.get(str(k), {})
             limit = name_limit(lim.get("planner", {}), lim.get("dry_run", []), lim.get("grasp", []))
             raise AcquisitionFailed(f"view {k}: giving up after {n - 1} re-scans ({reason}); limit: {limit}",
                                     detail={"view": k, "limit": limit.split(":")[0]})
-        self.j["rescans"][str(k)] = n
-        self.j["counters"]["rescans"] += 1
+        self.j.rescans[str(k)] = n
+        self.j.counters.rescans += 1
         # intent first: a kill between the move and the next journal write must not lose the view's frames
-        self.j["pending_rescan"] = {"view": k, "attempt": n}
-        self.j["scan_sets"].pop(str(k), None)
-        self.store.save_journal(self.j)
+        self.j.pending_rescan = {"view": k, "attempt": n}
+        self.j.scan_sets.pop(str(k), None)
+        self.store.save_journal(self.j.to_dict())
         self._finish_rescan()
         self.decide("re-scan", reason=reason, rescan=n)
         return State.SCAN
 
     def _finish_rescan(self) -> None:
         """Move the view's old attempt aside (idempotent: a resume calls it again) and clear the intent."""
-        pending = self.j["pending_rescan"]
+        pending = self.j.pending_rescan
         k, n = int(pending["view"]), int(pending["attempt"])
         src = view_dir(self.store.path, k)
         dst = src.with_name(f"{src.name}_attempt{n}")
         if src.exists() and not dst.exists():  # keep every captured frame: the old attempt moves aside
             shutil.move(str(src), str(dst))
-        self.j["pending_rescan"] = None
-        self.j["view"] = k
-        self.j["scan_sets"].pop(str(k), None)
+        self.j.pending_rescan = None
+        self.j.view = k
+        self.j.scan_sets.pop(str(k), None)
 
     async def plan_grasp(self) -> State:
         k = self.view
         view = self.store.load_view(k)
-        mode = self.j.get("grasp_mode", "auto")
+        mode = self.j.grasp_mode
         plan = await self.cell.plan_grasps(view.cloud, view.table, mode)
         self.store.save_json(f"view_{k:02d}/grasps_{mode}.json", {
             "mode": mode, "explanation": plan.explanation, "seconds": plan.seconds, "rejections": plan.rejections,
@@ -445,7 +444,7 @@ class Acquisition:
             planner[reason] = planner.get(reason, 0) + int(count)
         if not plan.grasps:
             if mode == "auto":
-                self.j["grasp_mode"] = "top_down"
+                self.j.grasp_mode = "top_down"
                 return await self._rescan(k, "no grasp found")
             return await self._rescan(k, "no grasp found (top-down)")
         self._plan = plan
@@ -462,7 +461,7 @@ class Acquisition:
         cfg = self.config
         offsets = [radial_offset_deg(g, center) for g in self._plan.grasps]
         order = sorted(range(len(offsets)), key=lambda i: abs(offsets[i]) > 50.0)
-        fixed = self.j.get("turn_direction")
+        fixed = self.j.turn_direction
         out = []
         for gi in order:
             grasp = self._plan.grasps[gi]
@@ -471,6 +470,64 @@ class Acquisition:
                                                abs(offsets[gi] + sq.direction * cfg.turn_deg)))
             out += [(gi, grasp, sq) for sq in sequences if fixed is None or sq.direction == fixed]
         return out
+
+    async def _attempt(self, k: int, gi: int, grasp: Grasp, seq: TurnPoses, q_start: np.ndarray,
+                       box: tuple[np.ndarray, np.ndarray], signature: str, failures: list[str]) -> State | None:
+        """Execute one checked pick-turn-place: the next state, or None when the arm refused a move before
+        the object was held (the caller tries the next chain)."""
+        view = self.store.load_view(k)
+        box_c, box_e = box
+        self.j.counters.grasp_attempts += 1
+        try:
+            await self.motion.execute_turn(grasp, seq, q_start, box_c, box_e, view.center, view.height)
+        except GraspFailed as exc:
+            self.j.counters.slips += 1
+            self.j.failed_grasps.setdefault(str(k), []).append(signature)
+            self._limits(k).setdefault("grasp", []).append(exc.message.split(":")[0][:40])
+            self.decide("grasp failed", grasp=gi, pose=seq.name, reason=exc.message)
+            self._plan = None
+            self.j.grasp_mode = "auto"
+            return await self._rescan(k, f"grasp failed: {exc.message}")
+        except RemoteError as exc:
+            failures.append(f"{seq.name}:{exc.code}")
+            self.decide("grasp pose not executable", grasp=gi, pose=seq.name, step=self.motion.step,
+                        code=exc.code, message=exc.message[:200])
+            return None
+        shift = relocation_shift(seq)
+        if shift is not None:
+            self.j.counters.regrasps += 1
+            self.j.regrasps.setdefault(str(k), []).append(
+                {"strategy": "relocated set-down", "pose": seq.name, "shift": np.round(shift, 4).tolist()})
+        self.decide("turned", grasp=gi, pose=seq.name, kind=grasp.kind, direction=seq.direction,
+                    relocated=None if shift is None else np.round(shift[:2], 3).tolist())
+        self._plan = None
+        return State.SCAN  # already journalled at the release (``_record_turn``)
+
+    async def _next_turn_possible(self, grasp: Grasp, seq: TurnPoses, center: np.ndarray) -> bool:
+        """Dry-run the turn after this one: the same grasp where ``seq`` leaves the object, turned again the
+        same way, directly or by a relocated set-down. A thin box set down where no next grasp reaches it
+        cannot be turned again (its pick fails whatever the set-down), so such a spot is avoided now."""
+        nxt = grasp_after(grasp, seq)
+        shift = relocation_shift(seq)
+        new_center = np.asarray(center, float) + (0.0 if shift is None else shift)
+        for nseq in turn_sequences(nxt, self.config.turn, float(self.j.heights.get(str(self.view), 0.1))):
+            if nseq.direction != seq.direction:
+                continue
+            try:
+                await self.motion.check_turn(nseq, new_center, float(grasp.width))
+                return True
+            except RemoteError as exc:
+                if exc.code in ("estop_latched", "busy"):
+                    raise
+                if self.motion.step in RELOCATABLE_STEPS:  # its pick reaches: a relocation may finish it
+                    for d in relocation_shifts(new_center, self.config.turn.relocation)[:2]:
+                        try:
+                            await self.motion.check_turn(relocated(nseq, d), new_center, float(grasp.width))
+                            return True
+                        except RemoteError as exc2:
+                            if exc2.code in ("estop_latched", "busy"):
+                                raise
+        return False
 
     async def turn(self) -> State:
         k = self.view
@@ -481,246 +538,126 @@ class Acquisition:
         box_c, box_e = object_box(view.center, view.height, view.cloud.xyz, cfg.turn.object_box_margin)
         failures: list[str] = []
         attempts = checks = 0
-        failed_before = set(self.j.setdefault("failed_grasps", {}).get(str(k), []))
-        await self._escape(view.center, view.height)
+        failed_before = set(self.j.failed_grasps.get(str(k), []))
+        await self.motion.escape(view.center, view.height)
         await self.cell.set_object_box(box_c, box_e)
-        for gi, grasp, seq in self._candidates(view.center, view.height):
-            signature = f"{grasp.kind}:{gi}:{seq.name}"
-            if attempts >= cfg.max_grasp_attempts or checks >= cfg.turn.max_checks:
+        direct = self._candidates(view.center, view.height)
+        late: list[tuple[int, Grasp, TurnPoses]] = []  # picks that were reachable; the turn or set-down was not
+        relocations = 0
+        shifts = relocation_shifts(view.center, cfg.turn.relocation)
+        tied = yaw_tied(list(self._plan.grasps)) and bool(shifts)
+        fallback: tuple[int, Grasp, TurnPoses, np.ndarray] | None = None  # passed its check, not the look-ahead
+        if tied:  # a thin box: where it is set down decides whether its next grasp is reachable
+            moved = [(gi, g, relocated(sq, d)) for d in shifts for gi, g, sq in direct]  # nearest spot first
+            far = float(np.hypot(*view.center[:2])) > cfg.turn.relocation.near_radius + cfg.turn.relocation.min_shift
+            # farther than the near ring: bring it in first; on the ring, top-down turns reach every yaw there
+            # (measured), so it moves again only once those have been tried too
+            direct = moved + direct if far else direct + moved if self.j.grasp_mode == "top_down" else direct
+            self.decide("yaw-tied grasps: relocated set-downs tried " + ("first" if far else "after direct ones"
+                                                                        if self.j.grasp_mode == "top_down" else
+                                                                        "after the top-down ones"),
+                        chains=len(direct), spots=[np.round(view.center[:2] + d[:2], 3).tolist() for d in shifts])
+        for phase in ("direct", "relocated"):
+            if phase == "relocated" and tied:
                 break
-            if signature in failed_before:  # it slipped before: after a re-scan, try another one first
-                continue
-            # the whole pick-turn-place is planned and checked before the hand moves: an attempt that would
-            # stop half-way (a joint limit in the middle of the turn) would leave the object part-turned,
-            # and every later attempt would work on a view that no longer matches it
-            checks += 1
-            self.j["counters"]["grasp_checks"] = self.j["counters"].get("grasp_checks", 0) + 1
+            if phase == "relocated":
+                if not late or not shifts:
+                    break
+                self.decide("trying relocated set-downs", chains=len(late),
+                            spots=[np.round(d[:2], 3).tolist() for d in shifts])
+                direct = [(gi, g, relocated(sq, d)) for d in shifts for gi, g, sq in late]  # nearest spot first
+            for gi, grasp, seq in direct:
+                signature = f"{grasp.kind}:{gi}:{seq.name}"
+                relocating = seq.carry_from is not None
+                if attempts >= cfg.max_grasp_attempts or (checks >= cfg.turn.max_checks and not relocating) \
+                        or relocations >= cfg.turn.relocation.max_checks:
+                    break
+                if signature in failed_before:  # it slipped before: after a re-scan, try another one first
+                    continue
+                # the whole pick-turn-place is planned and checked before the hand moves: an attempt that would
+                # stop half-way (a joint limit in the middle of the turn) would leave the object part-turned,
+                # and every later attempt would work on a view that no longer matches it
+                checks += 1
+                relocations += relocating
+                self.j.counters.grasp_checks += 1
+                try:
+                    q_start = await self.motion.check_turn(seq, view.center, float(grasp.width))
+                except RemoteError as exc:
+                    failures.append(f"{seq.name}:{exc.code}")
+                    self._limits(k).setdefault("dry_run", []).append(exc.code)
+                    self.decide("grasp pose not executable", grasp=gi, pose=seq.name, step=self.motion.step,
+                                code=exc.code, message=exc.message[:200], dry_run=True)
+                    if not relocating and self.motion.step in RELOCATABLE_STEPS:
+                        late.append((gi, grasp, seq))
+                    continue
+                if tied and k + 1 < cfg.views - 1:  # two-step look-ahead: will the next view turn too?
+                    if fallback is None:
+                        fallback = (gi, grasp, seq, q_start)
+                    if not await self._next_turn_possible(grasp, seq, view.center):
+                        self.decide("set-down leaves no executable next turn: trying another", grasp=gi,
+                                    pose=seq.name)
+                        continue
+                    try:  # the next chain's check took another branch: the start of this one is found again
+                        q_start = await self.motion.check_turn(seq, view.center, float(grasp.width))
+                    except RemoteError as exc:
+                        failures.append(f"{seq.name}:{exc.code}")
+                        continue
+                attempts += 1
+                outcome = await self._attempt(k, gi, grasp, seq, q_start, (box_c, box_e), signature, failures)
+                if outcome is not None:
+                    return outcome
+        if fallback is not None and attempts < cfg.max_grasp_attempts:
+            gi, grasp, seq, _ = fallback
+            self.decide("no set-down keeps the next turn executable: taking the first executable one",
+                        grasp=gi, pose=seq.name)
             try:
-                q_start = await self._check_turn(seq, view.center)
+                q_start = await self.motion.check_turn(seq, view.center, float(grasp.width))
             except RemoteError as exc:
                 failures.append(f"{seq.name}:{exc.code}")
-                self._limits(k).setdefault("dry_run", []).append(exc.code)
-                self.decide("grasp pose not executable", grasp=gi, pose=seq.name, step=self._step, code=exc.code,
-                            message=exc.message[:200], dry_run=True)
-                continue
-            attempts += 1
-            self.j["counters"]["grasp_attempts"] += 1
-            try:
-                await self._execute_turn(grasp, seq, q_start, box_c, box_e, view.center, view.height)
-            except GraspFailed as exc:
-                self.j["counters"]["slips"] += 1
-                self.j["failed_grasps"].setdefault(str(k), []).append(signature)
-                self._limits(k).setdefault("grasp", []).append(exc.message.split(":")[0][:40])
-                self.decide("grasp failed", grasp=gi, pose=seq.name, reason=exc.message)
-                self._plan = None
-                self.j["grasp_mode"] = "auto"
-                return await self._rescan(k, f"grasp failed: {exc.message}")
-            except RemoteError as exc:
-                failures.append(f"{seq.name}:{exc.code}")
-                self.decide("grasp pose not executable", grasp=gi, pose=seq.name, step=self._step, code=exc.code,
-                            message=exc.message[:200])
-                continue
-            self.decide("turned", grasp=gi, pose=seq.name, kind=grasp.kind, direction=seq.direction)
-            self._plan = None
-            return State.SCAN  # already journalled at the release (``_record_turn``)
+            else:
+                outcome = await self._attempt(k, gi, grasp, seq, q_start, (box_c, box_e),
+                                              f"{grasp.kind}:{gi}:{seq.name}", failures)
+                if outcome is not None:
+                    return outcome
         self._plan = None
-        if self.j.get("grasp_mode", "auto") != "top_down":
-            self.j["grasp_mode"] = "top_down"
+        if self.j.grasp_mode != "top_down":
+            self.j.grasp_mode = "top_down"
             self.decide("falling back to top-down grasps", failures=failures[:8])
             return State.PLAN_GRASP
-        self.j["grasp_mode"] = "auto"
+        self.j.grasp_mode = "auto"
         return await self._rescan(k, "no executable grasp")
-
-    async def _check_turn(self, seq: TurnPoses, center: np.ndarray) -> np.ndarray:
-        """Dry-run one pick-turn-place; returns the joints to stand in above the pre-grasp, or raises.
-
-        The only free choice is the IK branch at ``above_pregrasp``: from there every move is a straight
-        line whose dense IK continues the branch. The branches tried: the IK solution nearest the current
-        joints, nearest each configured seed (home), and each one's other wrist branch. A branch whose
-        wrist rolls run into their limits half-way through the turn is the failure this avoids.
-        """
-        from services.arm.kinematics import wrist_flip
-
-        m = self.config.turn
-        state = await self.cell.state()
-        seeds = [np.asarray(state.position, float), *(np.asarray(q, float) for q in m.branch_seeds)]
-        tried: list[np.ndarray] = []
-        last: tuple[str, RemoteError] | None = None
-        for seed in seeds:
-            try:
-                q_a = (await self.cell.move("pose", target=seq.above_pregrasp, q=seed, speed=m.speed_scale,
-                                            dry_run=True)).q
-            except RemoteError as exc:
-                last = last or ("to above pre-grasp", exc)
-                continue
-            for cand in (q_a, wrist_flip(q_a)):
-                if any(np.allclose(cand, t, atol=1e-3) for t in tried):
-                    continue
-                tried.append(cand)
-                step = "to above pre-grasp"
-                try:
-                    if cand is not q_a:  # the IK polishes the flipped branch and checks it is inside the limits
-                        cand = (await self.cell.move("pose", target=seq.above_pregrasp, q=cand,
-                                                     speed=m.speed_scale, dry_run=True)).q
-                    q = cand
-                    for mv in seq.straight_moves(center):
-                        step = mv.step
-                        q = (await self.cell.move("linear", target=mv.target, q=q, speed=m.approach_speed_scale,
-                                                  contact=mv.contact, dry_run=True)).q
-                    return np.asarray(cand, float)
-                except RemoteError as exc:
-                    if exc.code in ("estop_latched", "busy"):
-                        raise
-                    if last is None or last[0] == "to above pre-grasp":  # the farthest a branch got is the news
-                        last = (step, exc)
-        assert last is not None
-        self._step = last[0]
-        raise last[1]
-
-    async def _transit(self, target: np.ndarray, frame: str, speed: float) -> MoveResult:
-        """Move to ``target`` without a motion planner, safest route first.
-
-        1. a straight line (nothing swings down towards the table or the object on the way);
-        2. a jerk-limited joint motion (checked sample by sample against table, object box and envelope);
-        3. via the home posture (high, camera up): a joint path from there rarely dips.
-        Each is fully checked by the arm before it runs; the last failure is raised.
-        """
-        try:
-            return await self.cell.move("linear", target=target, frame=frame, speed=speed)
-        except RemoteError as exc:
-            if exc.code in ("estop_latched", "busy"):
-                raise
-        try:
-            return await self.cell.move("pose", target=target, frame=frame, speed=speed)
-        except RemoteError as exc:
-            if exc.code in ("estop_latched", "busy", "unreachable", "joint_limits"):
-                raise
-            self.decide("transit via home", code=exc.code)
-        await self.cell.move("home", speed=speed)
-        return await self.cell.move("pose", target=target, frame=frame, speed=speed)
-
-    async def _short_move(self, target: np.ndarray, speed: float, contact: bool = True,
-                          joint_fallback: bool = False) -> MoveResult:
-        """A few centimetres near the object: a straight line; with ``joint_fallback`` a joint motion where
-        the line needs a flip (only to get away from the object: near it, a joint motion between nearby
-        poses on different IK branches swings the hand far off the line, measured down to the table)."""
-        try:
-            return await self.cell.move("linear", target=target, speed=speed, contact=contact)
-        except RemoteError as exc:
-            if not joint_fallback or not exc.code.startswith("line_"):
-                raise
-            return await self.cell.move("pose", target=target, speed=speed, contact=contact)
-
-    async def _escape(self, center: np.ndarray, height: float) -> None:
-        """Get the hand clear of the object: back along its approach, then up above the object's top.
-
-        Needed after a failed attempt left the hand close to the object, where every joint-space motion
-        would be refused as colliding with the object's box.
-        """
-        m = self.config.turn
-        state = await self.cell.state()
-        T = np.asarray(state.T_base_gripper)
-        safe_z = height + m.clearance
-        if T[2, 3] >= safe_z - 1e-3 or np.linalg.norm(T[:2, 3] - center[:2]) > 0.2:
-            return
-        back = T.copy()
-        back[:3, 3] -= T[:3, 0] * 0.09
-        up = T.copy()
-        up[2, 3] = max(up[2, 3], safe_z)
-        back_up = back.copy()
-        back_up[2, 3] = max(back_up[2, 3], safe_z)
-        for route in ((back, back_up), (up,)):
-            try:
-                for target in route:
-                    await self._short_move(target, m.approach_speed_scale, joint_fallback=True)
-                return
-            except RemoteError as exc:
-                self.decide("escape route failed", code=exc.code)
-        # no straight way out: home by a joint motion, allowed through the object's box (there is no motion
-        # planner to go around it; in the twin the hand cannot topple the object)
-        self.decide("escaping through the object box to home")
-        await self.cell.clear_object_box()
-        await self.cell.move("home", speed=m.approach_speed_scale)
-
-    async def _execute_turn(self, grasp: Grasp, seq: TurnPoses, q_start: np.ndarray, box_c: np.ndarray,
-                            box_e: np.ndarray, center: np.ndarray, height: float) -> None:
-        """Pick, lift, turn about the table normal, set down, release, retreat. Raises on failure.
-
-        ``q_start`` is the checked branch above the pre-grasp (``_check_turn``); every later move is the
-        straight line the check planned. Motions before the gripper closes may fail harmlessly (RemoteError:
-        the caller tries the next pose); a failure while holding sets the object back down where the hand
-        is before re-raising.
-        """
-        c, m = self.cell, self.config.turn
-        opening = min(0.105, grasp.width + m.open_margin)
-        self._step = "open"
-        await c.gripper(opening, m.gripper_force)
-        await self._escape(center, height)
-        await c.set_object_box(box_c, box_e)
-        self._step = "to above pre-grasp"
-        await self._transit_joints(q_start, m.speed_scale)
-        moves = seq.straight_moves(center)
-        for mv in (mv for mv in moves if mv.phase == "approach"):
-            self._step = mv.step
-            await c.move("linear", target=mv.target, speed=m.approach_speed_scale, contact=mv.contact)
-        self._step = "close"
-        held_moves = [mv for mv in moves if mv.phase == "held"]
-        release_T = np.asarray(held_moves[-1].target if held_moves else seq.above_pregrasp, float)
-        self._journal_turn_intent("closing", view=self.view, direction=seq.direction, opening=opening,
-                                  release_T=release_T.tolist(), center=np.asarray(center, float).tolist(),
-                                  height=float(height))
-        held = await c.gripper(0.0, m.gripper_force)
-        if not held.holding:
-            await c.gripper(opening, m.gripper_force)
-            self._journal_turn_intent(None)
-            await self._escape(center, height)
-            raise GraspFailed(held.reason or "nothing between the pads")
-        self._journal_turn_intent("holding")
-        await c.clear_object_box()
-        try:
-            for mv in held_moves:
-                # the turn follows the arc in 5-degree chords, each a straight line continuing the branch
-                self._step = f"{mv.step} (holding)"
-                await c.move("linear", target=mv.target, speed=m.approach_speed_scale, contact=True)
-        except RemoteError:
-            await self._set_down_here(m.lift)
-            await c.gripper(opening, m.gripper_force)
-            self._journal_turn_intent(None)
-            await self._escape(center, height)
-            raise
-        await c.gripper(opening, m.gripper_force)
-        self._record_turn(self.view, seq.direction)  # the turn happened: journalled before the retreat
-        self._step = "retreat"
-        try:
-            for mv in (mv for mv in moves if mv.phase == "released"):
-                await c.move("linear", target=mv.target, speed=m.approach_speed_scale, contact=True)
-        except RemoteError as exc:  # the object is turned and released: escape as well as we can
-            self.decide("retreat failed; escaping", code=exc.code)
-            await self._escape(center, height)
-        await c.set_object_box(box_c, box_e)
 
     # ------------------------------------------------------------------------ turn journal (issue 17 #6, #7)
     def _journal_turn_intent(self, phase: str | None, **fields: Any) -> None:
         """Write where a turn stands before the next irreversible step: ``closing`` (the gripper is about
         to close), ``holding`` (the object is held and may be lifted and turned), or ``None`` (over)."""
+        if phase == "closing":
+            fields = {"view": self.view, **fields}
         if phase is None:
-            self.j["turn_intent"] = None
-            self.j["holding"] = False
+            self.j.turn_intent = None
+            self.j.holding = False
         else:
-            self.j["turn_intent"] = {**(self.j.get("turn_intent") or {}), **fields, "phase": phase}
-            self.j["holding"] = phase == "holding"
-        self.store.save_journal(self.j)
+            self.j.turn_intent = {**(self.j.turn_intent or {}), **fields, "phase": phase}
+            self.j.holding = phase == "holding"
+        self.store.save_journal(self.j.to_dict())
 
-    def _record_turn(self, k: int, direction: int) -> None:
-        """The object is released where the turn ends: the next view, its commanded turn, one journal write."""
-        self.j["turns_deg"].append(self.j["turns_deg"][k] + direction * self.config.turn_deg)
-        self.j.setdefault("turn_direction", direction)
-        self.j["view"] = k + 1
-        self.j["grasp_mode"] = "auto"
-        self.j["state"] = State.SCAN.value
-        self.j["turn_intent"] = None
-        self.j["holding"] = False
-        self.store.save_journal(self.j)
+    def _record_turn(self, k: int, direction: int, shift: np.ndarray | None = None) -> None:
+        """The object is released where the turn ends: the next view, its commanded turn, one journal write.
+        A relocated set-down (``shift``) also gives the next view's expected centre: its scan poses are
+        placed around where the object now stands, not where it stood."""
+        if shift is not None and str(k) in self.j.centers:
+            c = np.asarray(self.j.centers[str(k)], float)
+            self.j.centers[str(k + 1)] = (c + np.asarray(shift, float)).tolist()
+            self.j.heights[str(k + 1)] = self.j.heights[str(k)]
+        self.j.turns_deg.append(self.j.turns_deg[k] + direction * self.config.turn_deg)
+        if self.j.turn_direction is None:
+            self.j.turn_direction = direction
+        self.j.view = k + 1
+        self.j.grasp_mode = "auto"
+        self.j.state = State.SCAN.value
+        self.j.turn_intent = None
+        self.j.holding = False
+        self.store.save_journal(self.j.to_dict())
 
     async def _recover_turn(self) -> None:
         """Settle a turn the previous orchestrator left open, from what the arm reports (issue 17 #6, #7).
@@ -732,7 +669,7 @@ class Acquisition:
         - then, if it was held, the object may be part-turned: re-scan this view; if it was only about to be
           gripped, the turn is planned again.
         """
-        intent = self.j["turn_intent"]
+        intent = self.j.turn_intent
         k, phase = int(intent["view"]), intent.get("phase")
         opening = float(intent.get("opening", 0.1))
         state = await self.cell.state()
@@ -746,68 +683,47 @@ class Acquisition:
         if phase == "holding" and at_release:
             if closed:
                 await self.cell.gripper(opening, self.config.turn.gripper_force)
-            self._record_turn(k, int(intent["direction"]))
+            self._record_turn(k, int(intent["direction"]), intent.get("shift"))
             self.decide("turn had finished before the restart: recorded, not repeated", view=k + 1)
             return
         if closed:
             if phase == "holding":  # possibly lifted: lower it back onto the table first
-                await self._set_down_here(self.config.turn.lift)
+                await self.motion.set_down_here(self.config.turn.lift)
             await self.cell.gripper(opening, self.config.turn.gripper_force)
         self._journal_turn_intent(None)
-        await self._escape(np.asarray(intent["center"], float), float(intent["height"]))
-        self.j["view"] = k
+        await self.motion.escape(np.asarray(intent["center"], float), float(intent["height"]))
+        self.j.view = k
         if phase == "holding":  # the object may have turned part of the way: this view is no longer true
-            self.j["state"] = State.REGISTER.value  # _rescan's transition to SCAN is from REGISTER
+            self.j.state = State.REGISTER.value  # _rescan's transition to SCAN is from REGISTER
             self._go(await self._rescan(k, "turn interrupted by a restart"))
         else:
-            self.j["state"] = State.PLAN_GRASP.value
+            self.j.state = State.PLAN_GRASP.value
         self._persist()
-
-    async def _transit_joints(self, q: np.ndarray, speed: float) -> MoveResult:
-        """Joint motion to a checked configuration; via the home posture when the direct one is refused."""
-        try:
-            return await self.cell.move("joints", q=q, speed=speed)
-        except RemoteError as exc:
-            if exc.code in ("estop_latched", "busy"):
-                raise
-            self.decide("transit via home", code=exc.code)
-        await self.cell.move("home", speed=speed)
-        return await self.cell.move("joints", q=q, speed=speed)
-
-    async def _set_down_here(self, lift: float) -> None:
-        """While holding, lower the hand by ``lift`` where it is (the object back on the table)."""
-        state = await self.cell.state()
-        T = np.asarray(state.T_base_gripper).copy()
-        T[2, 3] -= lift
-        try:
-            await self._short_move(T, self.config.turn.approach_speed_scale)
-        except RemoteError as exc:
-            self.decide("could not lower the object before releasing it", code=exc.code)
 
     async def model(self) -> State:
         n = self.config.views
         views = [self.store.load_view(k) for k in range(n)]
-        turns = [float(t) for t in self.j["turns_deg"][:n]]
+        turns = [float(t) for t in self.j.turns_deg[:n]]
         self.incremental.catch_up(n - 1, turns)  # after a resume: any edge not started yet
         reuse = await self.incremental.finished()
         result = await self.cell.build_model(views, turns, {**self.incremental.config, "reuse_pairs": reuse})
         path = self.store.save_model(result.cloud)
         last_scan = scan_dir(self.store.path, n - 1, SCANS_PER_VIEW - 1) / "meta.json"
         if last_scan.is_file():  # the model's lateness: from the last view's last scan saved to the model saved
-            self.j["model_ready_s_after_last_view"] = round(path.stat().st_mtime - last_scan.stat().st_mtime, 2)
-        self.j["model_path"] = str(path)
+            self.j.model_ready_s_after_last_view = round(path.stat().st_mtime - last_scan.stat().st_mtime, 2)
+        self.j.model_path = str(path)
         report: dict[str, Any] = {"model": str(path), "points": len(result.cloud), "model_figures": result.figures,
                                   "turns_commanded_deg": turns, "incremental": self.config.incremental,
-                                  "model_ready_s_after_last_view": self.j.get("model_ready_s_after_last_view")}
-        if self.config.evaluate and self.j.get("simulated"):
+                                  "model_ready_s_after_last_view": self.j.model_ready_s_after_last_view}
+        if self.config.evaluate and self.j.simulated:
             report["accuracy"] = await self._evaluate(result.cloud.xyz)
-            self.j["accuracy"] = {k: report["accuracy"][k] for k in ("chamfer_mm", "accuracy_mm", "completeness_mm",
+            self.j.accuracy = {k: report["accuracy"][k] for k in ("chamfer_mm", "accuracy_mm", "completeness_mm",
                                                                       "fscore_2mm", "fscore_5mm")
                                   if k in report["accuracy"]}
-        self.decide("model built", points=len(result.cloud), accuracy=self.j.get("accuracy"))
-        report.update({"session": str(self.store.path), "config": self.j["config"], "counters": self.j["counters"],
-                       "timings_s": self.j["timings_s"], "seconds_total": round(time.time() - self.j["started"], 2),
-                       "decisions": self.j["decisions"],
+        self.decide("model built", points=len(result.cloud), accuracy=self.j.accuracy)
+        report.update({"session": str(self.store.path), "config": self.j.config, "counters": self.j.counters.to_dict(),
+                       "timings_s": self.j.timings_s, "seconds_total": round(time.time() - self.j.started, 2),
+                       "decisions": self.j.decisions,
                        "views": [self.store.load_json(f"view_{k:02d}/view.json").get("figures", {}) for k in range(n)]})
         self.store.save_json("report.json", report)
         if self.library is not None:
@@ -815,7 +731,7 @@ class Acquisition:
                 from services.library import add_session_model
 
                 entry = await asyncio.to_thread(add_session_model, self.library, self.store.path)
-                self.j["library_entry"] = entry
+                self.j.library_entry = entry
                 self.decide("model added to the library", entry=entry, library=str(self.library))
             except Exception as exc:  # the session folder keeps the model: a library failure loses nothing
                 self.decide("could not add the model to the library", error=repr(exc)[:300])

@@ -61,6 +61,7 @@ class TurnPoses:
     retreat: np.ndarray
     above_retreat: np.ndarray
     direction: int = 1  # +1: the planner's turn (counter-clockwise seen from above); -1: the mirror turn
+    carry_from: np.ndarray | None = None  # a relocated set-down: where the turn ends before the carry (regrasp.py)
 
     def straight_moves(self, center: np.ndarray) -> list[ChainMove]:
         """Every move after ``above_pregrasp``, in order: all straight lines, so that once the arm stands at
@@ -69,7 +70,10 @@ class TurnPoses:
         moves = [ChainMove("down to pre-grasp", self.pregrasp, "approach", contact=False),
                  ChainMove("approach", self.grasp, "approach"),
                  ChainMove("lift", self.lifted, "held")]
-        moves += [ChainMove("turn", w, "held") for w in turn_arc(self.lifted, self.turned_lifted, center)]
+        arc_end = self.turned_lifted if self.carry_from is None else self.carry_from
+        moves += [ChainMove("turn", w, "held") for w in turn_arc(self.lifted, arc_end, center)]
+        if self.carry_from is not None:  # the object carried, lifted, to where it is set down
+            moves += [ChainMove("carry", w, "held") for w in carry_line(self.carry_from, self.turned_lifted)]
         moves += [ChainMove("set down", self.turned, "held"),
                   ChainMove("retreat", self.retreat, "released"),
                   ChainMove("up", self.above_retreat, "released")]
@@ -127,6 +131,18 @@ def turn_sequences(grasp: Grasp, motion: TurnMotion, object_height: float) -> li
                                  lifted=_lift(g, motion.lift), turned_lifted=_lift(turn, motion.lift),
                                  turned=turn, retreat=retreat, above_retreat=_at_height(retreat, safe_z),
                                  direction=direction))
+    return out
+
+
+def carry_line(start: np.ndarray, end: np.ndarray, step: float = 0.05) -> list[np.ndarray]:
+    """Waypoints of a straight carry at constant orientation, at most ``step`` apart: each short line's
+    dense IK continues the previous one's branch, where one long line can end on another branch."""
+    n = max(1, int(np.ceil(np.linalg.norm(end[:3, 3] - start[:3, 3]) / step - 1e-9)))
+    out = []
+    for i in range(1, n + 1):
+        T = end.copy()
+        T[:3, 3] = start[:3, 3] + (end[:3, 3] - start[:3, 3]) * i / n
+        out.append(T)
     return out
 
 

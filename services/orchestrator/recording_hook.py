@@ -54,8 +54,8 @@ async def run_recorded(acquisition: Any, recorder: SessionRecorder | None) -> di
         return await acquisition.run()
     finally:
         if recorder is not None:
-            status = acquisition.j.get("status")
-            await asyncio.to_thread(recorder.close, {"status": status, "model": acquisition.j.get("model_path")})
+            status = acquisition.j.status
+            await asyncio.to_thread(recorder.close, {"status": status, "model": acquisition.j.model_path})
 
 
 def recorded_acquisition(make_acquisition: Callable[[Cell], Any], send: Any, session_dir: str | Path,

@@ -75,7 +75,7 @@ class OrchestratorService(Service):
             raise
         self.task = self.spawn(self._locked_run(run, store))
         return Ok(info={"session": str(path), "resumed": self.current.resumed,
-                        "status": self.current.j.get("status")})
+                        "status": self.current.j.status})
 
     @staticmethod
     async def _locked_run(run: Any, store: SessionStore) -> Any:

@@ -26,8 +26,8 @@ from tests.orchestrator.test_run_ends import RefusingCell
 def _journal(path, **fields):
     store = SessionStore(path)
     acq = Acquisition(RefusingCell(RuntimeError("unused")), store, AcquisitionConfig(views=3))  # type: ignore[arg-type]
-    acq.j.update(fields)
-    store.save_journal(acq.j)
+    acq.j.update(**fields)
+    store.save_journal(acq.j.to_dict())
     return store
 
 

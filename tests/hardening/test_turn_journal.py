@@ -79,7 +79,7 @@ def _session_in_turn(path, phase: str, release_T: np.ndarray) -> SessionStore:
                  turn_intent={"phase": phase, "view": 0, "direction": 1, "opening": 0.09,
                               "release_T": release_T.tolist(), "center": [0.6, 0.0, 0.0], "height": 0.2},
                  holding=phase == "holding")
-    store.save_journal(acq.j)
+    store.save_journal(acq.j.to_dict())
     return store
 
 
@@ -117,7 +117,7 @@ def test_a_kill_between_moving_the_view_aside_and_saving_the_journal(tmp_path, m
     store = SessionStore(tmp_path)
     acq = Acquisition(ScriptedArmCell(np.eye(4), 0.1), store, AcquisitionConfig(views=3))  # type: ignore[arg-type]
     acq.j.update(state="register", view=0)
-    store.save_journal(acq.j)
+    store.save_journal(acq.j.to_dict())
     (tmp_path / "view_00" / "scan_0").mkdir(parents=True)
     (tmp_path / "view_00" / "scan_0" / "meta.json").write_text("{}")
 

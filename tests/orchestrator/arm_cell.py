@@ -28,7 +28,7 @@ class ArmOnlyCell:
         self.holding = False
 
     async def move(self, kind: str, *, target=None, q=None, frame="gripper", speed=0.5,  # noqa: ANN001
-                   free_roll=False, contact=False, dry_run=False) -> MoveResult:
+                   free_roll=False, contact=False, dry_run=False, check_opening=None) -> MoveResult:
         a = self.arm
         entry = {"kind": kind, "dry_run": dry_run, "holding": self.holding}
         try:
@@ -37,9 +37,10 @@ class ArmOnlyCell:
             elif kind == "joints":
                 info = a.move_joints(q, speed, dry_run)
             elif kind == "pose":
-                info = a.move_pose(target, speed, free_roll, frame, contact, dry_run, q if dry_run else None)
+                info = a.move_pose(target, speed, free_roll, frame, contact, dry_run, q if dry_run else None,
+                                   check_opening)
             else:
-                info = a.move_linear(target, speed, frame, contact, dry_run, q if dry_run else None)
+                info = a.move_linear(target, speed, frame, contact, dry_run, q if dry_run else None, check_opening)
         except ArmError as exc:
             self.log.append({**entry, "error": exc.code})
             raise RemoteError(exc.message, code=exc.code) from None

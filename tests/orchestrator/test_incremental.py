@@ -145,7 +145,7 @@ def test_the_final_request_carries_the_finished_pairs_and_their_palette(tmp_path
     assert sorted(cell.jobs) == [(1, 0), (2, 1), (3, 2)]  # every edge whose views exist was sent, each once
     cfg = cell.dynamic_config
     assert cfg["preprocess"]["palette_views"] == 2 and len(cfg["reuse_pairs"]) == VIEWS - 1
-    assert acq.j["model_ready_s_after_last_view"] is not None
+    assert acq.j.model_ready_s_after_last_view is not None
 
 
 def test_with_the_incremental_model_off_nothing_is_sent_and_nothing_reused(tmp_path, view_results):

@@ -28,7 +28,7 @@ def test_the_limit_is_named_from_what_stood_in_the_way(rejections, dry, held, li
 
 def test_running_out_of_rescans_names_the_limit(tmp_path):
     acq = Acquisition(None, SessionStore(tmp_path), AcquisitionConfig(max_rescans=0))  # type: ignore[arg-type]
-    acq.j["limits"] = {"3": {"planner": {"too_wide": 12}, "dry_run": [], "grasp": []}}
+    acq.j.limits = {"3": {"planner": {"too_wide": 12}, "dry_run": [], "grasp": []}}
     with pytest.raises(AcquisitionFailed) as e:
         asyncio.run(acq._rescan(3, "no grasp found (top-down)"))
     assert "limit: gripper stroke" in e.value.message and "106 mm" in e.value.message

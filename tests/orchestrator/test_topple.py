@@ -55,11 +55,11 @@ def test_a_view_standing_as_before_is_registered(tmp_path):
 def test_a_toppled_object_restarts_the_views_from_where_it_lies(tmp_path):
     acq = _at_view_2(tmp_path, 0.07)  # a 200 mm tall box now lies on its 70 mm side
     assert asyncio.run(acq.register()) == State.SCAN
-    assert acq.view == 0 and acq.j["turns_deg"] == [0.0] and "turn_direction" not in acq.j
-    assert acq.j["heights"] == {"-1": 0.07}
+    assert acq.view == 0 and acq.j.turns_deg == [0.0] and acq.j.turn_direction is None
+    assert acq.j.heights == {"-1": 0.07}
     assert not (tmp_path / "view_02").exists() and not acq.store.has_view(2)
     assert (tmp_path / "view_00_toppled1").is_dir() and (tmp_path / "view_02_toppled1").is_dir()
-    assert any(d["what"].startswith("object toppled") for d in acq.j["decisions"])
+    assert any(d["what"].startswith("object toppled") for d in acq.j.decisions)
 
 
 def test_toppling_again_after_a_restart_ends_with_the_reason(tmp_path):

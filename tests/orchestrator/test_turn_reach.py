@@ -108,9 +108,9 @@ def test_turn_is_checked_in_full_before_the_hand_moves(kin, tmp_path):
     acq.j.update(view=1, state="turn", turns_deg=[0.0, -30.0], turn_direction=-1)
     acq._plan = GraspPlanReply(grasps=plan.to_messages(), rejections={}, explanation=plan.explain(), seconds=0.0)
     nxt = asyncio.run(acq.turn())
-    assert nxt == State.SCAN, acq.j["decisions"]
-    assert acq.j["turns_deg"][-1] == -60.0
+    assert nxt == State.SCAN, acq.j.decisions
+    assert acq.j.turns_deg[-1] == -60.0
     executed = [m for m in cell.log if not m["dry_run"]]
     assert [m for m in executed if m["error"]] == []
     assert any(m["holding"] for m in executed)
-    assert acq.j["counters"]["grasp_attempts"] == 1
+    assert acq.j.counters.grasp_attempts == 1

@@ -245,11 +245,12 @@ def test_close_writes_everything_queued_before_it(tmp_path):
 
 
 def test_recorded_acquisition_wraps_the_cell_and_cleans_up_when_it_cannot_start(tmp_path):
+    from services.orchestrator.journal import Journal
     from services.orchestrator.recording_hook import recorded_acquisition
 
     class FakeAcquisition:
         def __init__(self, cell):  # noqa: ANN001
-            self.cell, self.resumed, self.j = cell, False, {"status": "done"}
+            self.cell, self.resumed, self.j = cell, False, Journal(config={}, status="done")
             self.store = type("S", (), {"path": tmp_path})()
             self.config = type("C", (), {"to_dict": lambda self: {"object": "milk", "seed": 2}})()
 
