@@ -66,11 +66,11 @@ def _truth(session: Path, k: int) -> np.ndarray:
 def oracle_chamfer(session: Path, out: Path, name: str) -> tuple[float, float]:
     """(model, true-pose fusion) Chamfer in mm, both from the CLI's outputs and scored the same way."""
     from bench.dynamic import _chamfer, _gt
+    from bench.synthetic import oracle_poses
     from common.geometry import invert
     from common.messages import Plane
     from services.registration.cloud import read_ply
     from services.registration.dynamic.model import fuse
-    from bench.synthetic import oracle_poses
     from services.registration.dynamic.views import DynamicView
 
     T0 = _truth(session, 0)

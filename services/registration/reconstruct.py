@@ -27,7 +27,7 @@ from services.registration.cloud import write_ply
 from services.registration.dynamic.model import DynamicConfig, MapPairs, build_model
 from services.registration.dynamic.pair import register_pair
 from services.registration.dynamic.views import view_from_static
-from services.registration.static import StaticConfig, ViewResult, register_view
+from services.registration.static import StaticConfig, StaticViewResult, register_view
 from services.registration.static.pose_errors import prior_pose_errors, relative_pose_errors
 
 Progress = Callable[[dict[str, Any]], None]
@@ -58,7 +58,7 @@ def reconstruct(
     (out / "views").mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
     views_report: list[dict[str, Any]] = []
-    results: dict[int, ViewResult] = {}
+    results: dict[int, StaticViewResult] = {}
     indices = [int(entry["index"]) for entry in session.views]
     turns = {int(e["index"]): float(e.get("commanded_turn_deg", 0.0)) for e in session.views}
     n_workers = max(1, min(workers or default_workers(), len(indices)))
@@ -107,12 +107,14 @@ def default_workers() -> int:
     return cores if cores >= 4 else 1
 
 
-def _register_one(job: tuple[Path, int, list[int], StaticConfig]) -> tuple[int, dict[str, Any], ViewResult | None]:
+def _register_one(
+    job: tuple[Path, int, list[int], StaticConfig],
+) -> tuple[int, dict[str, Any], StaticViewResult | None]:
     """One view's static registration (runs in a worker process): its report item and result, or the error."""
     session_path, index, scans, cfg = job
     t0 = time.perf_counter()
     item: dict[str, Any] = {}
-    result: ViewResult | None = None
+    result: StaticViewResult | None = None
     try:
         if not scans:
             raise ObjscanError(f"view {index} has no complete scan", code="no_scans")
@@ -156,12 +158,12 @@ def _worker_pool(workers: int) -> Iterator[ProcessPoolExecutor | None]:
 # DYNAMIC STAGE -- the hook for dynamic registration (issue: dynamic scan registration, paper II-C).
 # The dynamic-registration engineer replaces the body below with the call into
 # ``services.registration.dynamic`` (not imported here yet): it receives every successful view's
-# ``ViewResult`` (object cloud, table plane, object centre; keyed by view index), the session (for the
+# ``StaticViewResult`` (object cloud, table plane, object centre; keyed by view index), the session (for the
 # commanded turns: ``session.commanded_turn_deg(k)``) and ``out_dir``; it writes the model (e.g.
 # ``out_dir/model.ply``) and returns the JSON-able figures that go into ``report["model"]``.
 # ==================================================================================================
 def run_dynamic_stage(
-    results: dict[int, ViewResult],
+    results: dict[int, StaticViewResult],
     session: Any,
     out_dir: Path,
     report: dict[str, Any],
@@ -195,7 +197,7 @@ def run_dynamic_stage(
     return figures
 
 
-def _ground_truth(result: ViewResult, frames: list) -> dict[str, Any] | None:
+def _ground_truth(result: StaticViewResult, frames: list) -> dict[str, Any] | None:
     errs = relative_pose_errors(result, frames)
     if not errs:
         return None

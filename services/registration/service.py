@@ -29,7 +29,7 @@ from services.registration.static.config import StaticConfig
 from services.registration.static.pipeline import register_view
 
 
-def view_result_message(view: int, result) -> ViewResult:  # noqa: ANN001 - static.result.ViewResult
+def view_result_message(view: int, result) -> ViewResult:  # noqa: ANN001 - static.result.StaticViewResult
     """Wire form of a static registration result."""
     return ViewResult(view=view, cloud=result.object_cloud, table=result.table,
                       center=np.asarray(result.object_center, dtype=np.float64),

@@ -15,7 +15,7 @@ pytestmark = pytest.mark.timeout(600)
 @pytest.mark.slow  # ~60 s on the shared machine: 8 frames rendered, recorded, isolated, 7 full-circle turn searches
 def test_a_recorded_turntable_sequence_imports(tmp_path):
     shared_data("hope", "milk")
-    from services.camera.realsense.software import SoftwareD435Spec, record_db3
+    from bench.software_d435 import SoftwareD435Spec, record_db3
     from services.importer.session import ImportConfig, import_sequence
     from services.sim.turntable import TurntableSpec, turntable_frames
 

@@ -88,7 +88,7 @@ def validate_views(views: list[DynamicView], min_views: int = 3) -> None:
 
 def view_from_static(result, commanded_turn_deg: float, index: int = 0,
                      T_view0_view_true: np.ndarray | None = None) -> DynamicView:
-    """A ``DynamicView`` from the static stage's ``ViewResult`` (``services/registration/static``).
+    """A ``DynamicView`` from the static stage's ``StaticViewResult`` (``services/registration/static``).
 
     The static stage reports the object's footprint centre on the table; the dynamic stage wants the
     centre of the object body (the point the unit-sphere crop projects from), so it is lifted by half

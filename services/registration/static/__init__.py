@@ -13,7 +13,7 @@ from .errors import (
     StaticRegistrationError,
 )
 from .pipeline import register_view
-from .result import ScanResult, ViewResult
+from .result import ScanResult, StaticViewResult
 
 __all__ = [
     "BadFramesError",
@@ -24,6 +24,6 @@ __all__ = [
     "ScanResult",
     "StaticConfig",
     "StaticRegistrationError",
-    "ViewResult",
+    "StaticViewResult",
     "register_view",
 ]

@@ -21,7 +21,7 @@ from services.registration.cloud import estimate_normals, from_o3d, to_o3d
 from . import default_profile, paper_profile
 from .config import StaticConfig
 from .isolate import footprint_centre, isolate_object
-from .result import PairOutcome, ScanResult, Stopwatch, ViewResult
+from .result import PairOutcome, ScanResult, StaticViewResult, Stopwatch
 from .scans import Scan, centre_depth, load_scans
 from .table import segment_table
 
@@ -64,7 +64,7 @@ def _scan_results(scans: list[Scan], poses: list[np.ndarray], outcomes: list[Pai
     return out
 
 
-def register_view(frames: list[RGBDFrame], config: StaticConfig | None = None) -> ViewResult:
+def register_view(frames: list[RGBDFrame], config: StaticConfig | None = None) -> StaticViewResult:
     """Register the scans of one view and isolate the goal object, all in ``base``.
 
     ``frames`` are the scans of one view (scan 0 first: its believed pose anchors the view and its image
@@ -135,7 +135,7 @@ def register_view(frames: list[RGBDFrame], config: StaticConfig | None = None) -
             estimate_normals(obj, cfg.output_voxel * 2.5, toward=viewpoint)
             centre, height = footprint_centre(np.asarray(obj.points), table.plane)
             cloud = from_o3d(obj, frame="base")
-    return ViewResult(
+    return StaticViewResult(
         object_cloud=cloud,
         table=table.plane,
         object_center=centre,

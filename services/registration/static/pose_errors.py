@@ -10,10 +10,10 @@ from __future__ import annotations
 from common.geometry import invert, transform_error
 from common.messages import RGBDFrame
 
-from .result import ViewResult
+from .result import StaticViewResult
 
 
-def relative_pose_errors(result: ViewResult, frames: list[RGBDFrame]) -> list[tuple[float, float]] | None:
+def relative_pose_errors(result: StaticViewResult, frames: list[RGBDFrame]) -> list[tuple[float, float]] | None:
     """(mm, deg) of each scan j >= 1 relative to scan 0, or None when the frames carry no ground truth."""
     if len(frames) != len(result.scans) or any(f.T_base_camera_true is None for f in frames):
         return None

@@ -68,7 +68,7 @@ class PairOutcome:
 
 
 @dataclass
-class ViewResult:
+class StaticViewResult:
     """Static registration and isolation of one view (all geometry in ``base``)."""
 
     object_cloud: PointCloud  # xyz float32, rgb uint8, normals float32
