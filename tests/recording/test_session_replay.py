@@ -130,7 +130,10 @@ def test_registration_replay_reproduces_the_model(recorded, tmp_path, capsys):
 
     out = tmp_path / "replay"
     assert main([str(recorded / "session.mcap"), "--out", str(out), "--only", "registration"]) == 0
-    assert "identical to the recording" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    # the CLI says "identical" only byte for byte; across processes coordinates may differ by float rounding
+    # (see _assert_same_model), which it reports as a difference within the tolerance
+    assert "identical to the recording" in printed or "(within 0.5 mm)" in printed, printed
     report = json.loads((out / "replay.json").read_text())
     assert (out / "model.ply").is_file() and report["views"] == [0, 1, 2]
     _assert_same_model(report["comparison"])
