@@ -50,3 +50,10 @@ def name_limit(planner_rejections: dict[str, int], dry_run_codes: list[str], gra
     if rej:
         return f"no grasp: no pair of faces the gripper can close on ({_fmt(rej)})"
     return "no grasp: the planner found no candidate on the isolated object"
+
+
+def name_scan_pose_limit(dry_run_codes: list[str]) -> str:
+    """The limit behind a view with no reachable set of scan poses: the camera cannot be brought around the
+    object where it stands (too far, too close to the base, or the camera would hit the cell): reach."""
+    return (f"reach: no set of scan poses around the object is reachable where it stands "
+            f"({_fmt(Counter(dry_run_codes)) or 'no candidate poses'})")

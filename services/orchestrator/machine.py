@@ -44,7 +44,7 @@ from services.orchestrator.cell import Cell
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.incremental import IncrementalModel
 from services.orchestrator.journal import Journal
-from services.orchestrator.limits import name_limit
+from services.orchestrator.limits import name_limit, name_scan_pose_limit
 from services.orchestrator.motion import ArmMotion, GraspFailed
 from services.orchestrator.planning import (
     TurnPoses,
@@ -333,8 +333,9 @@ class Acquisition:
                 continue
             self.j.scan_sets[key] = [T.tolist() for T in candidate]
             return candidate
-        raise AcquisitionFailed("no reachable set of scan poses around the object",
-                                detail={"center": center.tolist(), "reasons": reasons[:6]})
+        raise AcquisitionFailed(f"view {view}: no reachable set of scan poses around the object; "
+                                f"limit: {name_scan_pose_limit(reasons)}",
+                                detail={"center": center.tolist(), "reasons": reasons[:6], "limit": "reach"})
 
     async def scan(self) -> State:
         k = self.view

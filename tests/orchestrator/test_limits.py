@@ -33,3 +33,22 @@ def test_running_out_of_rescans_names_the_limit(tmp_path):
         asyncio.run(acq._rescan(3, "no grasp found (top-down)"))
     assert "limit: gripper stroke" in e.value.message and "106 mm" in e.value.message
     assert e.value.detail["limit"] == "gripper stroke"
+
+
+class _UnreachableCell:
+    """A cell whose arm refuses every dry-run camera pose as out of reach."""
+
+    async def move(self, kind: str, **kwargs) -> None:  # noqa: ANN003
+        from common.errors import RemoteError
+
+        raise RemoteError("pose out of reach", code="unreachable")
+
+
+def test_no_reachable_scan_poses_names_the_reach_limit(tmp_path):
+    """The tall box of test_household_meshes ended with a bare "no reachable set of scan poses around the
+    object": a reach limit, which the message must name like every other one."""
+    acq = Acquisition(_UnreachableCell(), SessionStore(tmp_path), AcquisitionConfig())  # type: ignore[arg-type]
+    with pytest.raises(AcquisitionFailed) as e:
+        asyncio.run(acq._reachable_scan_set(0))
+    assert "limit: reach" in e.value.message and "unreachable x" in e.value.message
+    assert e.value.detail["limit"] == "reach"
