@@ -7,11 +7,14 @@ edge by edge: for a recorded session (``objscan bench reconstruct`` keeps them w
 the static stage is not what is measured here), then every pair of one configuration is registered and its
 transform compared with the true one.
 
-Truth: each view's best pose on the ground-truth mesh (``bench.synthetic.oracle_poses``, the same poses the
-"oracle" row fuses with), so the camera's per-scan and hand-eye errors the static clouds carry are in the
-truth too. Edge s -> t's true transform in the stacked frame is ``S_t O_t^-1 O_s S_s^-1`` (S: the view's
-pre-rotation, O: its oracle pose); the yaw error is the signed angle about the turn axis of
-``R_est R_true^T``, the translation error the displacement of the object centre.
+Truth: the twin's own record. A view's cloud is in ``base`` as scan 0's *believed* camera pose puts it
+(the static stage's frame), so its true pose in view 0's object-fixed frame is
+``O_k = B0 Bk^-1 C_k C'_k^-1`` (B: the object's true pose, C / C': scan 0's true / believed camera pose):
+the camera's per-scan and hand-eye errors the static clouds carry are in the truth. (The "oracle" row's
+per-view fit on the mesh, ``bench.synthetic.oracle_poses``, leaves a cylinder's yaw free and is not used
+here.) Edge s -> t's true transform in the stacked frame is ``S_t O_t^-1 O_s S_s^-1`` (S: the view's
+pre-rotation); the yaw error is the signed angle about the turn axis of ``R_est R_true^T``, the translation
+error the displacement of the object centre.
 
 ``python -m bench.pair_yaw SESSION [SESSION ...] [--configuration no_region] [--json F]``
 """
@@ -50,9 +53,29 @@ def session_views(session: Path) -> tuple[list, np.ndarray]:
     return views, _gt(name, T0)
 
 
-def _truth(session: Path) -> np.ndarray:
-    m = json.loads((session / "view_00" / "scan_0" / "meta.json").read_text())
-    return np.asarray(m["T_base_object_true"], dtype=float).reshape(4, 4)
+def _meta(session: Path, k: int) -> dict:
+    return json.loads((session / f"view_{k:02d}" / "scan_0" / "meta.json").read_text())
+
+
+def _truth(session: Path, k: int = 0) -> np.ndarray:
+    return np.asarray(_meta(session, k)["T_base_object_true"], dtype=float).reshape(4, 4)
+
+
+def true_view_poses(session: Path, n: int) -> list[np.ndarray]:
+    """``O_k``: view k's cloud (scan 0's believed frame) into view 0's ``base``, from the twin's record."""
+    import ast
+
+    out = []
+    B0 = _truth(session, 0)
+    for k in range(n):
+        m = _meta(session, k)
+        gt = m["ground_truth"]
+        gt = ast.literal_eval(gt) if isinstance(gt, str) else gt
+        C = np.asarray(gt["T_base_camera"], dtype=float).reshape(4, 4)
+        Cb = np.asarray(m["T_base_camera"] if not isinstance(m["T_base_camera"], str)
+                        else json.loads(m["T_base_camera"]), dtype=float).reshape(4, 4)
+        out.append(B0 @ np.linalg.inv(_truth(session, k)) @ C @ np.linalg.inv(Cb))
+    return out
 
 
 def true_edges(prep: Any, oracle: list[np.ndarray]) -> dict[tuple[int, int], np.ndarray]:
@@ -82,7 +105,6 @@ def edge_error(T: np.ndarray, T_true: np.ndarray, axis: np.ndarray, center: np.n
 
 def measure(session: Path, configuration: str = "no_region", pair: Any = None) -> dict[str, Any]:
     """Every edge of ``configuration`` on ``session``: its error against the truth, path, fitness, CPU s."""
-    from bench.synthetic import oracle_poses
     from services.registration.dynamic.combine import loop_closure_error
     from services.registration.dynamic.configurations import CONFIGURATIONS
     from services.registration.dynamic.model import DynamicConfig, chain_to_first, make_pair_jobs
@@ -95,7 +117,7 @@ def measure(session: Path, configuration: str = "no_region", pair: Any = None) -
     regions, crop = CONFIGURATIONS[configuration]
     if regions:
         attach_regions(prep, cfg.preprocess)
-    truth = true_edges(prep, oracle_poses(views, gt))
+    truth = true_edges(prep, true_view_poses(Path(session), len(views)))
     jobs = make_pair_jobs(prep, replace(pair or cfg.pair, regions=regions, crop=crop))
     c0 = time.process_time()
     results = [register_pair(j) for j in jobs[:-1]]

@@ -43,8 +43,9 @@ from common.geometry import rotation_about_line, yaw_deg_about
 from services.registration.blocks import ColorICPConfig, colored_icp, overlap_only
 from services.registration.dynamic.global_registration import global_register
 from services.registration.dynamic.preprocess import Cloud
-from services.registration.dynamic.turn4dof import TurnSearchConfig, project_to_turn, search_turn
+from services.registration.dynamic.turn4dof import TurnSearchConfig, chroma, project_to_turn, search_turn
 from services.registration.dynamic.views import DynamicRegistrationError
+from services.registration.dynamic.yaw_refine import YawRefineConfig, refine_yaw
 
 reg = o3d.pipelines.registration
 
@@ -73,6 +74,9 @@ class PairConfig:
     accept_fitness: float = 0.55  # verification of the prior path (fitness on the evaluation clouds)
     accept_rmse: float = 0.0018
     fast_point_to_plane: bool = True  # last point-to-plane pass: sim milk loop error 2.0° -> 0.3°, Chamfer -21 %
+    # then a 1-D yaw search about the turn axis scored by fitness + colour agreement (``yaw_refine``): colour
+    # ICP leaves a can's yaw 2-5° off, one-sided (realistic alphabet soup: loop 25.9° -> see BENCHMARKS.md)
+    yaw_refine: YawRefineConfig = field(default_factory=YawRefineConfig)
     # global stages when the prior path fails verification: first the 4-DoF turn search (yaw about the table
     # normal + shift: an object on a table only turns and slides), the 6-DoF search only if that fails too
     turn_stage: bool = True
@@ -191,6 +195,21 @@ class _Scorer:
             return 0.0, np.inf, 0.0
         same = np.all(self.source.rgb[inl] == self.target.rgb[j[inl]], axis=1)
         return n_in / len(pts), float(np.sqrt(np.mean(d[inl] ** 2))), float(same.sum()) / len(pts)
+
+    def colour_distance(self, T: np.ndarray) -> tuple[float, float]:
+        """(fitness, mean chromaticity difference of the inlier pairs) of ``T``: a smooth colour-agreement
+        measure (``turn4dof.chroma``, shading-tolerant) where the exact-colour count above moves in steps."""
+        if len(self.source) == 0 or len(self.target) == 0:
+            return 0.0, np.inf
+        if not hasattr(self, "_chroma"):
+            self._chroma = (chroma(self.source.rgb)[:, :3], chroma(self.target.rgb)[:, :3])
+        pts = self.source.xyz.astype(np.float64) @ T[:3, :3].T + T[:3, 3]
+        d, j = self.tree.query(pts, k=1, distance_upper_bound=self.distance)
+        inl = np.isfinite(d)
+        if not inl.any():
+            return 0.0, np.inf
+        cs, ct = self._chroma
+        return float(inl.sum()) / len(pts), float(np.abs(cs[inl] - ct[j[inl]]).sum(axis=1).mean())
 
 
 def _score_key(f: float, cf: float) -> float:
@@ -402,6 +421,7 @@ def _register_fast(job: PairJob, cfg: PairConfig, scorer: _Scorer) -> PairResult
         if best is None or key > best[0]:
             best = (key, T, cand.name, sc)
     assert best is not None
+    best = _yaw_refined(job, cfg, scorer, best, tried)
     _, T, name, (f, rmse, cf) = best
     path = "prior"
     prior_tilt, prior_yaw = tilt_deg(T, job.axis), yaw_from_prior_deg(T, job.prior, job.axis)
@@ -413,7 +433,7 @@ def _register_fast(job: PairJob, cfg: PairConfig, scorer: _Scorer) -> PairResult
             best = (-np.inf, T, name, (f, rmse, cf))  # a tumble: any turn found beats it
         key, T4, sc4 = _turn_stage(job, cfg, scorer, tried)
         if key > best[0]:
-            best, path = (key, T4, "full", sc4), "turn4dof"
+            best, path = _yaw_refined(job, cfg, scorer, (key, T4, "full", sc4), tried), "turn4dof"
         _, T, name, (f, rmse, cf) = best
     if not _verified(f, rmse, cfg):
         # still inconsistent (a toppled or re-seated object): global 6-DoF stage, then the same local refinement
@@ -440,6 +460,28 @@ def _register_fast(job: PairJob, cfg: PairConfig, scorer: _Scorer) -> PairResult
         f, rmse, cf = scorer(T)
     return PairResult(job.index, job.source_view, job.target_view, T, f, rmse, cf, path, name, 0.0,
                       attempts=1, color_icp_failures=fails_total, detail=detail)
+
+
+def _yaw_refined(job: PairJob, cfg: PairConfig, scorer: _Scorer,
+                 best: tuple[float, np.ndarray, str, tuple[float, float, float]], tried: list[dict]
+                 ) -> tuple[float, np.ndarray, str, tuple[float, float, float]]:
+    """``best`` after the 1-D yaw search about the turn axis (``yaw_refine``), scored like every candidate."""
+    key, T, name, sc = best
+    if not cfg.yaw_refine.enabled:
+        return best
+    f0 = sc[0]
+
+    def colour(Ty: np.ndarray) -> float:  # colour agreement, among yaws that keep the geometric fit
+        f, dc = scorer.colour_distance(Ty)
+        return -dc if f >= f0 - cfg.yaw_refine.fitness_tolerance else -np.inf
+
+    r = refine_yaw(T, colour, job.axis, job.center, cfg.yaw_refine)
+    tried.append({"candidate": f"{name}+yaw", "yaw_offset_deg": r.offset_deg, "score_before": r.score_before,
+                  "score_after": r.score_after})
+    if r.offset_deg == 0.0:
+        return best
+    sc = scorer(r.T)
+    return _score_key(sc[0], sc[2]), r.T, name, sc
 
 
 def yaw_from_prior_deg(T: np.ndarray, prior: np.ndarray, axis: np.ndarray) -> float:
