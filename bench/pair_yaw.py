@@ -16,7 +16,8 @@ here.) Edge s -> t's true transform in the stacked frame is ``S_t O_t^-1 O_s S_s
 pre-rotation); the yaw error is the signed angle about the turn axis of ``R_est R_true^T``, the translation
 error the displacement of the object centre.
 
-``python -m bench.pair_yaw SESSION [SESSION ...] [--configuration no_region] [--json F]``
+``python -m bench.pair_yaw SESSION [SESSION ...] [--configuration no_region] [--no-yaw-refine] [--json F]``
+(``--no-yaw-refine``: the fast path as it was before the yaw search, for before / after figures)
 """
 
 from __future__ import annotations
@@ -155,9 +156,16 @@ def main() -> None:
         i = args.index("--json")
         out_json = args[i + 1]
         del args[i:i + 2]
+    pair = None
+    if "--no-yaw-refine" in args:
+        from services.registration.dynamic.pair import PairConfig
+        from services.registration.dynamic.yaw_refine import YawRefineConfig
+
+        args.remove("--no-yaw-refine")
+        pair = PairConfig(yaw_refine=YawRefineConfig(enabled=False))
     rows = []
     for s in args:
-        r = measure(Path(s), conf)
+        r = measure(Path(s), conf, pair)
         rows.append(r)
         print(f"{Path(s).name} [{conf}]: |yaw err| median {r['abs_yaw_err_deg_median']} max "
               f"{r['abs_yaw_err_deg_max']} deg, chain sum {r['yaw_err_sum_chain_deg']} deg, loop "
