@@ -75,8 +75,14 @@ def true_view_poses(session: Path, n: int) -> list[np.ndarray]:
         C = np.asarray(gt["T_base_camera"], dtype=float).reshape(4, 4)
         Cb = np.asarray(m["T_base_camera"] if not isinstance(m["T_base_camera"], str)
                         else json.loads(m["T_base_camera"]), dtype=float).reshape(4, 4)
-        out.append(B0 @ np.linalg.inv(_truth(session, k)) @ C @ np.linalg.inv(Cb))
+        out.append(true_view_pose(B0, _truth(session, k), C, Cb))
     return out
+
+
+def true_view_pose(B0: np.ndarray, Bk: np.ndarray, C_true: np.ndarray, C_believed: np.ndarray) -> np.ndarray:
+    """``O_k = B0 Bk^-1 C C'^-1``: view k's cloud (in ``base`` as scan 0's believed camera pose ``C'`` puts it;
+    ``C`` the true one) into view 0's ``base``, where B0 / Bk are the object's true poses in views 0 / k."""
+    return B0 @ np.linalg.inv(Bk) @ C_true @ np.linalg.inv(C_believed)
 
 
 def true_edges(prep: Any, oracle: list[np.ndarray]) -> dict[tuple[int, int], np.ndarray]:

@@ -102,8 +102,10 @@ class SyntheticScan:
 
 
 def synthetic_views(object_name: str, views: int = 12, scans_per_view: int = 3,
-                    profile: str = "hand-turned", seed: int = 0, voxel: float = 0.001) -> SyntheticScan:
-    """Virtually scan a HOPE object turned ``views`` times by ~360/views degrees.
+                    profile: str = "hand-turned", seed: int = 0, voxel: float = 0.001,
+                    turn_deg: float | None = None) -> SyntheticScan:
+    """Virtually scan a HOPE object turned ``views`` times by ~360/views degrees (or ``turn_deg`` each:
+    two views 30 degrees apart make one pair for a test).
 
     Returns isolated, fused, normal-carrying views in ``base`` with their commanded cumulative turn,
     a table plane z = 0 and a naive centre estimate (centroid of the visible side), like the static
@@ -119,7 +121,7 @@ def synthetic_views(object_name: str, views: int = 12, scans_per_view: int = 3,
     cams = scan_camera_poses()[:scans_per_view] if scans_per_view <= 3 else scan_camera_poses(
         heights=tuple(np.linspace(0.2, 0.32, scans_per_view)),
         azimuths_deg=tuple(np.linspace(-30, 30, scans_per_view)))
-    step = 360.0 / views
+    step = 360.0 / views if turn_deg is None else float(turn_deg)
     yaw_true = 0.0
     position = OBJECT_POSITION.copy()
     table = Plane(normal=np.array([0.0, 0.0, 1.0]), offset=0.0, center=OBJECT_POSITION.copy())

@@ -196,6 +196,26 @@ class _Scorer:
         same = np.all(self.source.rgb[inl] == self.target.rgb[j[inl]], axis=1)
         return n_in / len(pts), float(np.sqrt(np.mean(d[inl] ** 2))), float(same.sum()) / len(pts)
 
+    def refit_shift(self, T: np.ndarray, iterations: int = 3, max_points: int = 3000) -> np.ndarray:
+        """``T`` with its translation re-fitted by point-to-plane least squares (rotation kept): a yaw tried
+        about an estimated centre a little off the object's own axis then costs no geometric fit."""
+        src = self.source.xyz.astype(np.float64)
+        if len(src) > max_points:
+            src = src[np.linspace(0, len(src) - 1, max_points).astype(int)]
+        tn = self.target.normals.astype(np.float64)
+        T = np.array(T, dtype=float)
+        for _ in range(iterations):
+            p = src @ T[:3, :3].T + T[:3, 3]
+            d, j = self.tree.query(p, k=1, distance_upper_bound=2.0 * self.distance)
+            ok = np.isfinite(d)
+            if ok.sum() < 20:
+                break
+            n = tn[j[ok]]
+            r = np.einsum("ij,ij->i", p[ok] - self.target.xyz[j[ok]].astype(np.float64), n)
+            A = n.T @ n + 1e-6 * np.eye(3)  # a can's shift along its axis is free: keep it small
+            T[:3, 3] += np.linalg.solve(A, -n.T @ r)
+        return T
+
     def colour_distance(self, T: np.ndarray) -> tuple[float, float]:
         """(fitness, mean chromaticity difference of the inlier pairs) of ``T``: a smooth colour-agreement
         measure (``turn4dof.chroma``, shading-tolerant) where the exact-colour count above moves in steps."""
@@ -475,7 +495,7 @@ def _yaw_refined(job: PairJob, cfg: PairConfig, scorer: _Scorer,
         f, dc = scorer.colour_distance(Ty)
         return -dc if f >= f0 - cfg.yaw_refine.fitness_tolerance else -np.inf
 
-    r = refine_yaw(T, colour, job.axis, job.center, cfg.yaw_refine)
+    r = refine_yaw(T, colour, job.axis, job.center, cfg.yaw_refine, refit=scorer.refit_shift)
     tried.append({"candidate": f"{name}+yaw", "yaw_offset_deg": r.offset_deg, "score_before": r.score_before,
                   "score_after": r.score_after})
     if r.offset_deg == 0.0:

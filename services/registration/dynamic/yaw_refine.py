@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from common.geometry import rotation_about_line
+from services.registration.dynamic.views import DynamicRegistrationError
 
 Score = Callable[[np.ndarray], float]
 
@@ -39,8 +40,8 @@ class YawRefineConfig:
 
     def __post_init__(self) -> None:
         if not (0 < self.fine_step_deg <= self.step_deg <= self.range_deg):
-            raise ValueError("yaw refine needs 0 < fine_step_deg <= step_deg <= range_deg, got "
-                             f"{self.fine_step_deg}, {self.step_deg}, {self.range_deg}")
+            raise DynamicRegistrationError("yaw refine needs 0 < fine_step_deg <= step_deg <= range_deg, got "
+                             f"{self.fine_step_deg}, {self.step_deg}, {self.range_deg}", code="bad_value")
 
 
 @dataclass
@@ -54,10 +55,13 @@ class YawRefineResult:
 
 
 def refine_yaw(T: np.ndarray, score: Score, axis: np.ndarray, center: np.ndarray,
-               config: YawRefineConfig | None = None) -> YawRefineResult:
+               config: YawRefineConfig | None = None,
+               refit: Callable[[np.ndarray], np.ndarray] | None = None) -> YawRefineResult:
     """The yaw about ``axis`` through ``center`` (applied after ``T``) that maximises ``score``.
 
-    ``score(T) -> float``, higher is better. Returns ``T`` itself (offset 0) when no hypothesis beats it.
+    ``score(T) -> float``, higher is better. ``refit`` (optional) re-fits each hypothesis's translation
+    before it is scored (the rotation line through an estimated centre is not the object's own axis).
+    Returns ``T`` itself (offset 0) when no hypothesis beats it.
     """
     cfg = config or YawRefineConfig()
     T = np.asarray(T, dtype=float)
@@ -65,11 +69,14 @@ def refine_yaw(T: np.ndarray, score: Score, axis: np.ndarray, center: np.ndarray
     if not cfg.enabled:
         return YawRefineResult(T, 0.0, base, base)
     seen: dict[float, float] = {0.0: base}
+    poses: dict[float, np.ndarray] = {0.0: T}
 
     def at(deg: float) -> float:
         key = round(deg, 6)
         if key not in seen:
-            seen[key] = float(score(rotation_about_line(axis, center, np.radians(deg)) @ T))
+            Ty = rotation_about_line(axis, center, np.radians(deg)) @ T
+            poses[key] = Ty = refit(Ty) if refit is not None else Ty
+            seen[key] = float(score(Ty))
         return seen[key]
 
     n = int(np.floor(cfg.range_deg / cfg.step_deg + 1e-9))
@@ -80,4 +87,4 @@ def refine_yaw(T: np.ndarray, score: Score, axis: np.ndarray, center: np.ndarray
     best = max(fine, key=lambda d: (at(d), -abs(d)))
     if at(best) <= base:
         return YawRefineResult(T, 0.0, base, base)
-    return YawRefineResult(rotation_about_line(axis, center, np.radians(best)) @ T, float(best), base, at(best))
+    return YawRefineResult(poses[round(best, 6)], float(best), base, at(best))
