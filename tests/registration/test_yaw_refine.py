@@ -58,7 +58,7 @@ def test_refine_yaw_finds_the_peak_of_the_score():
         p = T[:3, :3] @ probe + T[:3, 3] - center
         return -abs(np.degrees(np.arctan2(p[1], p[0])) - 3.3)
 
-    r = refine_yaw(T0, score, axis, center, YawRefineConfig(range_deg=8.0, step_deg=1.0, fine_step_deg=0.25))
+    r = refine_yaw(T0, score, axis, center, YawRefineConfig(range_deg=8.0, steps_deg=(1.0, 0.25)))
     assert abs(r.offset_deg - 3.25) < 1e-9 and r.score_after > r.score_before
     expected = rotation_about_line(axis, center, np.radians(3.25))
     assert np.allclose(r.T, expected)
@@ -74,6 +74,6 @@ def test_refine_yaw_keeps_the_transform_when_nothing_beats_it():
 
 
 def test_yaw_refine_config_rejects_bad_steps():
-    with pytest.raises(DynamicRegistrationError, match="fine_step_deg") as e:
-        YawRefineConfig(step_deg=2.0, fine_step_deg=3.0)
+    with pytest.raises(DynamicRegistrationError, match="steps_deg") as e:
+        YawRefineConfig(steps_deg=(2.0, 3.0))
     assert e.value.code == "bad_value"

@@ -216,20 +216,27 @@ class _Scorer:
             T[:3, 3] += np.linalg.solve(A, -n.T @ r)
         return T
 
-    def colour_distance(self, T: np.ndarray) -> tuple[float, float]:
-        """(fitness, mean chromaticity difference of the inlier pairs) of ``T``: a smooth colour-agreement
-        measure (``turn4dof.chroma``, shading-tolerant) where the exact-colour count above moves in steps."""
+    def colour_distance(self, T: np.ndarray) -> tuple[float, float, float]:
+        """(fitness, mean chromaticity difference, point-to-plane rmse in mm) of the inlier pairs of ``T``.
+
+        The chromaticity difference (``turn4dof.chroma``, shading-tolerant) is a smooth colour-agreement
+        measure where the exact-colour count above moves in steps. The point-to-plane rmse is flat along a
+        surface's own symmetry (a can's yaw) and rises off it (a box's), unlike the fitness, which on a
+        partial view grows with the overlap and so pulls a can's yaw to one side."""
         if len(self.source) == 0 or len(self.target) == 0:
-            return 0.0, np.inf
+            return 0.0, np.inf, np.inf
         if not hasattr(self, "_chroma"):
             self._chroma = (chroma(self.source.rgb)[:, :3], chroma(self.target.rgb)[:, :3])
         pts = self.source.xyz.astype(np.float64) @ T[:3, :3].T + T[:3, 3]
         d, j = self.tree.query(pts, k=1, distance_upper_bound=self.distance)
         inl = np.isfinite(d)
         if not inl.any():
-            return 0.0, np.inf
+            return 0.0, np.inf, np.inf
         cs, ct = self._chroma
-        return float(inl.sum()) / len(pts), float(np.abs(cs[inl] - ct[j[inl]]).sum(axis=1).mean())
+        jj = j[inl]
+        plane = np.einsum("ij,ij->i", pts[inl] - self.target.xyz[jj], self.target.normals[jj])
+        return (float(inl.sum()) / len(pts), float(np.abs(cs[inl] - ct[jj]).sum(axis=1).mean()),
+                1000.0 * float(np.sqrt(np.mean(plane ** 2))))
 
 
 def _score_key(f: float, cf: float) -> float:
@@ -491,9 +498,9 @@ def _yaw_refined(job: PairJob, cfg: PairConfig, scorer: _Scorer,
         return best
     f0 = sc[0]
 
-    def colour(Ty: np.ndarray) -> float:  # colour agreement, among yaws that keep the geometric fit
-        f, dc = scorer.colour_distance(Ty)
-        return -dc if f >= f0 - cfg.yaw_refine.fitness_tolerance else -np.inf
+    def colour(Ty: np.ndarray) -> float:  # geometric fit and colour agreement (see YawRefineConfig)
+        f, dc, plane_mm = scorer.colour_distance(Ty)
+        return -dc - cfg.yaw_refine.plane_rmse_weight * plane_mm if f >= f0 - cfg.yaw_refine.fitness_drop else -np.inf
 
     r = refine_yaw(T, colour, job.axis, job.center, cfg.yaw_refine, refit=scorer.refit_shift)
     tried.append({"candidate": f"{name}+yaw", "yaw_offset_deg": r.offset_deg, "score_before": r.score_before,
