@@ -196,7 +196,7 @@ class _Scorer:
         same = np.all(self.source.rgb[inl] == self.target.rgb[j[inl]], axis=1)
         return n_in / len(pts), float(np.sqrt(np.mean(d[inl] ** 2))), float(same.sum()) / len(pts)
 
-    def refit_shift(self, T: np.ndarray, iterations: int = 3, max_points: int = 3000) -> np.ndarray:
+    def refit_shift(self, T: np.ndarray, iterations: int = 2, max_points: int = 1000) -> np.ndarray:
         """``T`` with its translation re-fitted by point-to-plane least squares (rotation kept): a yaw tried
         about an estimated centre a little off the object's own axis then costs no geometric fit."""
         src = self.source.xyz.astype(np.float64)
