@@ -17,6 +17,8 @@ from common.messages import PointCloud
 from services.registration.dynamic.pair import PairConfig, PairJob, PairResult
 from services.registration.dynamic.preprocess import Cloud
 from services.registration.dynamic.turn4dof import TurnSearchConfig
+from services.registration.dynamic.views import DynamicRegistrationError
+from services.registration.dynamic.yaw_refine import YawRefineConfig
 
 
 @dataclass(kw_only=True)
@@ -90,11 +92,11 @@ def _rebuild(cls: type, d: dict, what: str):  # noqa: ANN202
         out[k] = v
     try:
         return cls(**out)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, DynamicRegistrationError) as exc:
         raise InvalidRequest(f"bad {what}: {exc}") from None
 
 
-_NESTED: dict[type, dict[str, type]] = {PairConfig: {"turn_search": TurnSearchConfig}}
+_NESTED: dict[type, dict[str, type]] = {PairConfig: {"turn_search": TurnSearchConfig, "yaw_refine": YawRefineConfig}}
 
 
 def _config(d: dict) -> PairConfig:

@@ -15,7 +15,13 @@ from bench.synthetic import synthetic_views
 from common.geometry import rotation_about_line
 from services.registration.dynamic.model import pair_job
 from services.registration.dynamic.pair import PairConfig, register_pair
-from services.registration.dynamic.preprocess import PreprocessConfig, prepare_view, scan_palette, stacking_frame
+from services.registration.dynamic.preprocess import (
+    Cloud,
+    PreprocessConfig,
+    prepare_view,
+    scan_palette,
+    stacking_frame,
+)
 from services.registration.dynamic.views import DynamicRegistrationError
 from services.registration.dynamic.yaw_refine import YawRefineConfig, refine_yaw
 from tests.conftest import shared_data
@@ -77,3 +83,25 @@ def test_yaw_refine_config_rejects_bad_steps():
     with pytest.raises(DynamicRegistrationError, match="steps_deg") as e:
         YawRefineConfig(steps_deg=(2.0, 3.0))
     assert e.value.code == "bad_value"
+
+
+def test_the_yaw_refine_config_travels_to_workers():
+    """Pair jobs go to registration workers over the wire: the nested yaw-search config must survive the trip,
+    and a bad one is refused as an invalid request."""
+    from common.codec import decode, encode
+    from common.errors import InvalidRequest
+    from services.registration.dynamic.pair import PairJob
+    from services.registration.pair_wire import _config, _config_dict, pair_job_from_message, pair_job_message
+
+    rng = np.random.default_rng(0)
+    cloud = Cloud(rng.random((60, 3)).astype(np.float32), rng.integers(0, 255, (60, 3)).astype(np.uint8),
+                  np.tile(np.float32([0, 0, 1]), (60, 1)))
+    cfg = PairConfig(yaw_refine=YawRefineConfig(range_deg=10.0, steps_deg=(1.0, 0.25), plane_rmse_weight=0.1))
+    job = PairJob(index=3, source_view=4, target_view=3, source=cloud, target=cloud, center=np.zeros(3),
+                  axis=np.array([0.0, 0.0, 1.0]), config=cfg)
+    back = pair_job_from_message(decode(encode(pair_job_message(job))))
+    assert back.config == cfg and isinstance(back.config.yaw_refine, YawRefineConfig)
+    bad = _config_dict(cfg)
+    bad["yaw_refine"]["steps_deg"] = [0.25, 1.0]
+    with pytest.raises(InvalidRequest, match="yaw_refine"):
+        _config(bad)
