@@ -105,3 +105,25 @@ def test_the_yaw_refine_config_travels_to_workers():
     bad["yaw_refine"]["steps_deg"] = [0.25, 1.0]
     with pytest.raises(InvalidRequest, match="yaw_refine"):
         _config(bad)
+
+
+@pytest.mark.slow
+def test_the_automatic_choice_accepts_a_textured_can_at_its_first_configuration():
+    """12 realistic twin views of the alphabet soup can: with the yaw search the first configuration's loop
+    closes and the staged choice stops there; without it the same views drift and the acceptance test
+    rejects them (a wrong chain is still refused)."""
+    from dataclasses import replace
+
+    from services.registration.dynamic.model import DynamicConfig, build_model
+
+    shared_data("hope", "alphabet_soup")
+    views = synthetic_views("alphabet_soup", views=12, scans_per_view=3, profile="realistic", seed=0).views
+    model = build_model(views, DynamicConfig())
+    assert model.configuration == "no_region", model.reason
+    assert model.reason.startswith("first configuration consistent"), model.reason
+    assert list(model.candidates) == ["no_region"]
+    assert model.loop_closure["rotation_deg"] < 5.0
+    off = DynamicConfig(configuration="no_region", pair=replace(DynamicConfig().pair,
+                                                                yaw_refine=YawRefineConfig(enabled=False)))
+    drifted = build_model(views, off)
+    assert drifted.loop_closure["rotation_deg"] > 5.0, drifted.loop_closure  # what the acceptance test refuses
