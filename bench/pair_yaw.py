@@ -16,7 +16,9 @@ here.) Edge s -> t's true transform in the stacked frame is ``S_t O_t^-1 O_s S_s
 pre-rotation); the yaw error is the signed angle about the turn axis of ``R_est R_true^T``, the translation
 error the displacement of the object centre.
 
-``python -m bench.pair_yaw SESSION [SESSION ...] [--configuration no_region] [--no-yaw-refine] [--json F]``
+``python -m bench.pair_yaw SESSION [SESSION ...] [--configuration no_region] [--no-yaw-refine] [--json F]``;
+a SESSION ``synthetic:NAME[:SEED]`` uses ``bench.synthetic`` views of a HOPE object instead (realistic turn
+draws, no static stage, exact view poses: quick, for objects without a recorded session)
 (``--no-yaw-refine``: the fast path as it was before the yaw search, for before / after figures)
 """
 
@@ -111,20 +113,36 @@ def edge_error(T: np.ndarray, T_true: np.ndarray, axis: np.ndarray, center: np.n
 
 
 def measure(session: Path, configuration: str = "no_region", pair: Any = None) -> dict[str, Any]:
-    """Every edge of ``configuration`` on ``session``: its error against the truth, path, fitness, CPU s."""
+    """Every edge of ``configuration`` on a recorded ``session`` against the twin's record."""
+    views, _ = session_views(session)
+    return {"session": str(session), **measure_views(views, true_view_poses(Path(session), len(views)),
+                                                     configuration, pair)}
+
+
+def measure_synthetic(name: str, seed: int = 0, configuration: str = "no_region", pair: Any = None) -> dict[str, Any]:
+    """The same on ``bench.synthetic`` views (realistic turn draws, no static stage: exact view poses)."""
+    from bench.synthetic import synthetic_views
+
+    views = synthetic_views(name, views=12, scans_per_view=3, profile="realistic", seed=seed).views
+    return {"session": f"synthetic:{name}:{seed}",
+            **measure_views(views, [np.asarray(v.T_view0_view_true) for v in views], configuration, pair)}
+
+
+def measure_views(views: list, poses: list[np.ndarray], configuration: str = "no_region",
+                  pair: Any = None) -> dict[str, Any]:
+    """Every edge of ``configuration``: its error against the true view poses, path, fitness, CPU s."""
     from services.registration.dynamic.combine import loop_closure_error
     from services.registration.dynamic.configurations import CONFIGURATIONS
     from services.registration.dynamic.model import DynamicConfig, chain_to_first, make_pair_jobs
     from services.registration.dynamic.pair import register_pair
     from services.registration.dynamic.preprocess import attach_regions, preprocess
 
-    views, gt = session_views(session)
     cfg = DynamicConfig()
     prep = preprocess(views, cfg.preprocess)
     regions, crop = CONFIGURATIONS[configuration]
     if regions:
         attach_regions(prep, cfg.preprocess)
-    truth = true_edges(prep, true_view_poses(Path(session), len(views)))
+    truth = true_edges(prep, poses)
     jobs = make_pair_jobs(prep, replace(pair or cfg.pair, regions=regions, crop=crop))
     c0 = time.process_time()
     results = [register_pair(j) for j in jobs[:-1]]
@@ -142,7 +160,7 @@ def measure(session: Path, configuration: str = "no_region", pair: Any = None) -
                       "seconds": round(r.seconds, 2)})
     yaw = np.array([e["yaw_err_deg"] for e in edges])
     loop = loop_closure_error(results, prep.center)
-    return {"session": str(session), "configuration": configuration, "pairs_cpu_s": round(cpu, 2),
+    return {"configuration": configuration, "pairs_cpu_s": round(cpu, 2),
             "abs_yaw_err_deg_median": round(float(np.median(np.abs(yaw))), 3),
             "abs_yaw_err_deg_max": round(float(np.abs(yaw).max()), 3),
             "yaw_err_sum_chain_deg": round(float(yaw[:-1].sum()), 2),
@@ -171,7 +189,8 @@ def main() -> None:
         pair = PairConfig(yaw_refine=YawRefineConfig(enabled=False))
     rows = []
     for s in args:
-        r = measure(Path(s), conf, pair)
+        r = (measure_synthetic(s.split(":")[1], int(s.split(":")[2]) if s.count(":") > 1 else 0, conf, pair)
+             if s.startswith("synthetic:") else measure(Path(s), conf, pair))
         rows.append(r)
         print(f"{Path(s).name} [{conf}]: |yaw err| median {r['abs_yaw_err_deg_median']} max "
               f"{r['abs_yaw_err_deg_max']} deg, chain sum {r['yaw_err_sum_chain_deg']} deg, loop "
