@@ -45,7 +45,7 @@ from services.registration.dynamic.global_registration import global_register
 from services.registration.dynamic.preprocess import Cloud
 from services.registration.dynamic.turn4dof import TurnSearchConfig, chroma, project_to_turn, search_turn
 from services.registration.dynamic.views import DynamicRegistrationError
-from services.registration.dynamic.yaw_refine import YawRefineConfig, refine_yaw
+from services.registration.dynamic.yaw_refine import YawRefineConfig, geometry_pins_yaw, refine_yaw
 
 reg = o3d.pipelines.registration
 
@@ -495,6 +495,11 @@ def _yaw_refined(job: PairJob, cfg: PairConfig, scorer: _Scorer,
     """``best`` after the 1-D yaw search about the turn axis (``yaw_refine``), scored like every candidate."""
     key, T, name, sc = best
     if not cfg.yaw_refine.enabled:
+        return best
+    pinned, rise = geometry_pins_yaw(T, lambda Ty: scorer.colour_distance(Ty)[2], job.axis, job.center,
+                                     cfg.yaw_refine, refit=scorer.refit_shift)
+    if pinned:  # the shape fixes the yaw (a box): the ICP's yaw stands
+        tried.append({"candidate": f"{name}+yaw", "pinned_by_geometry": True, "plane_rise_mm": round(rise, 3)})
         return best
     f0 = sc[0]
 

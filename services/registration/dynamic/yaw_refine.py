@@ -1,18 +1,16 @@
 """A 1-D yaw search about the turn axis that lets colour fix what geometry leaves free (fast pair path).
 
 Why: the fast path's coarse-to-fine colour ICP converges on geometry first. On a body of revolution (a can)
-geometry does not constrain the yaw about its axis at all, and the colour ICP's gradient term (on the
-8-colour quantised clouds, 6 -> 2 mm voxels) then settles 2-5 degrees off, consistently to one side: on the
-realistic twin's alphabet soup every one of 11 edges was off by -0.3...+5.4 degrees, +24.7 degrees summed
-round the loop (``bench.pair_yaw``), although the clouds' colour agreement itself peaks within 0.5 degrees of
-the true yaw on every edge. So after the local refinement, the yaw about the table normal through the
-object centre is searched directly, each hypothesis scored by the pair's own score (geometric fitness plus
-colour agreement on the evaluation clouds): on a can the colour term decides; on a box the geometric
-fitness falls off within a degree or two of its optimum and keeps the ICP's yaw.
+geometry does not constrain the yaw about its axis, and the colour ICP (8-colour quantised clouds, 6 -> 2 mm
+voxels) then settled 2-16 degrees off, mostly to one side: on the realistic twin's alphabet soup the 11 chain
+edges summed to +24.7 degrees, on the tomato sauce to +40.9 (``bench.pair_yaw``, against the twin's record),
+although the clouds' colour agreement peaks within 0.5 degrees of the true yaw on every edge.
 
-Coarse to fine: every ``steps_deg[0]`` over +-``range_deg``, then every next step within one step of the best
-so far. The rotation is about the line through ``center`` along ``axis``; since that estimated centre is not
-the object's own axis, each hypothesis's translation is re-fitted (``refit``) before it is scored.
+So after the local refinement, where geometry leaves the yaw free (``geometry_pins_yaw``: the point-to-plane
+rmse barely changes 2 degrees either side; on a box the ICP's yaw stands), the yaw about the table normal
+through the object centre is searched directly: every ``steps_deg[0]`` over +-``range_deg``, then each finer
+step within one step of the best so far. Each hypothesis's translation is re-fitted (``refit``: the estimated
+centre is not the object's own axis) and the pair scores it (``YawRefineConfig`` says how).
 """
 
 from __future__ import annotations
@@ -45,6 +43,12 @@ class YawRefineConfig:
     range_deg: float = 16.0
     steps_deg: tuple[float, ...] = (2.0, 0.5, 0.25)  # each level searches +- the previous step about the best
     plane_rmse_weight: float = 0.05  # per mm: a box's 1 mm rise (4 deg off) weighs like 0.05 of colour
+    # the search runs only where geometry leaves the yaw free: the point-to-plane rmse at +-probe_deg rises on
+    # average by at most pinned_rise_mm (realistic twin, +-2 deg: cans -0.02...+0.02 mm, the milk carton
+    # +0.24...+0.34 mm). On a box the shape already fixes the yaw and colour would only add its own bias (the
+    # real castard box: the loop went 0.46 -> 4.2 deg when colour was allowed to move every edge)
+    probe_deg: float = 2.0
+    pinned_rise_mm: float = 0.05
     fitness_drop: float = 0.1  # guard: a yaw may not lose more geometric fitness than this
 
     def __post_init__(self) -> None:
@@ -64,6 +68,20 @@ class YawRefineResult:
     offset_deg: float
     score_before: float
     score_after: float
+
+
+def geometry_pins_yaw(T: np.ndarray, plane_rmse_mm: Callable[[np.ndarray], float], axis: np.ndarray,
+                      center: np.ndarray, config: YawRefineConfig | None = None,
+                      refit: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[bool, float]:
+    """(whether the shape fixes the yaw, the mean rise in mm): the point-to-plane rmse at +-``probe_deg`` about
+    ``axis`` through ``center`` against its value at ``T`` (each pose's shift re-fitted by ``refit``)."""
+    cfg = config or YawRefineConfig()
+    fit = refit or (lambda M: M)
+    p0 = plane_rmse_mm(fit(np.asarray(T, dtype=float)))
+    side = [plane_rmse_mm(fit(rotation_about_line(axis, center, np.radians(d)) @ T))
+            for d in (-cfg.probe_deg, cfg.probe_deg)]
+    rise = 0.5 * (side[0] + side[1]) - p0
+    return bool(rise > cfg.pinned_rise_mm), float(rise)
 
 
 def refine_yaw(T: np.ndarray, score: Score, axis: np.ndarray, center: np.ndarray,
