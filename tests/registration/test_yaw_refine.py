@@ -127,3 +127,33 @@ def test_the_automatic_choice_accepts_a_textured_can_at_its_first_configuration(
                                                                 yaw_refine=YawRefineConfig(enabled=False)))
     drifted = build_model(views, off)
     assert drifted.loop_closure["rotation_deg"] > 5.0, drifted.loop_closure  # what the acceptance test refuses
+
+
+def _surface(kind: str) -> Cloud:
+    """Points with outward normals on the side of a 3.4 cm-radius cylinder or a 9 x 6 cm box, 10 cm tall,
+    standing on z = 0 around the origin (half of it: one view)."""
+    rng = np.random.default_rng(0)
+    z = rng.uniform(0.005, 0.1, 6000)
+    if kind == "cylinder":
+        a = rng.uniform(-np.pi / 2, np.pi / 2, 6000)
+        n = np.column_stack([np.cos(a), np.sin(a), np.zeros_like(a)])
+        xyz = np.column_stack([0.034 * n[:, :2], z])
+    else:
+        u = rng.uniform(-1, 1, 6000)
+        front = u < 0.2  # the x = +4.5 cm face and the y = +3 cm face
+        xyz = np.where(front[:, None], np.column_stack([np.full_like(u, 0.045), 0.03 * u, z]),
+                       np.column_stack([0.045 * u, np.full_like(u, 0.03), z]))
+        n = np.where(front[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    return Cloud(xyz.astype(np.float32), np.full((6000, 3), 128, np.uint8), n.astype(np.float32))
+
+
+@pytest.mark.parametrize("kind, pinned", [("cylinder", False), ("box", True)])
+def test_geometry_pins_a_box_yaw_and_leaves_a_cylinder_free(kind, pinned):
+    from services.registration.dynamic.pair import _Scorer
+    from services.registration.dynamic.yaw_refine import geometry_pins_yaw
+
+    c = _surface(kind)
+    scorer = _Scorer(c, c, 0.003)
+    got, rise = geometry_pins_yaw(np.eye(4), lambda T: scorer.colour_distance(T)[2], np.array([0.0, 0, 1]),
+                                  np.array([0.0, 0, 0.05]), refit=scorer.refit_shift)
+    assert got is pinned, rise
