@@ -28,6 +28,9 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--profile", default="default", choices=["default", "paper"], help="static registration profile")
     p.add_argument("--workers", type=int, default=None,
                    help="worker processes for views and pair jobs (default: one per core from 4 cores up, else 1)")
+    p.add_argument("--threads", type=int, default=None,
+                   help="threads sharing views and pair jobs when no worker processes run "
+                        "(default: one per core; 1: serial)")
     p.add_argument("--gt", help="ground-truth mesh path or HOPE object name, for evaluation")
     p.set_defaults(func=run)
 
@@ -55,7 +58,8 @@ def run(args) -> int:  # noqa: ANN001
     def progress(info: dict[str, Any]) -> None:
         console.print(" ".join(f"{k}={v}" for k, v in info.items() if not isinstance(v, (dict, list))))
 
-    report = reconstruct(session, out, StaticConfig.for_profile(args.profile), progress=progress, workers=args.workers)
+    report = reconstruct(session, out, StaticConfig.for_profile(args.profile), progress=progress, workers=args.workers,
+                         threads=args.threads)
     model = out / "model.ply"
     if args.gt and model.is_file():
         import open3d as o3d

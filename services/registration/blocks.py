@@ -16,6 +16,8 @@ import numpy as np
 import open3d as o3d
 from scipy.spatial import cKDTree
 
+from services.registration.cloud import o3d_seeded
+
 reg = o3d.pipelines.registration
 
 
@@ -58,16 +60,16 @@ def ransac_feature_match(source: o3d.geometry.PointCloud, target: o3d.geometry.P
                          ) -> reg.RegistrationResult:
     """RANSAC over mutual FPFH matches (point-to-point fits, edge-length and distance checks at ``max_corr``).
 
-    Open3D's random generator is seeded first, which makes the result reproducible with
-    ``OMP_NUM_THREADS=1``; the seed is folded into Open3D's 31-bit range.
+    Open3D's random generator is seeded first (and held, ``cloud.o3d_seeded``), which makes the result
+    reproducible with ``OMP_NUM_THREADS=1``; the seed is folded into Open3D's 31-bit range.
     """
-    o3d.utility.random.seed(int(seed) & 0x7FFFFFFF)
-    return reg.registration_ransac_based_on_feature_matching(
-        source, target, source_features, target_features, True, max_corr,
-        reg.TransformationEstimationPointToPoint(False), config.ransac_n,
-        [reg.CorrespondenceCheckerBasedOnEdgeLength(config.edge_length_similarity),
-         reg.CorrespondenceCheckerBasedOnDistance(max_corr)],
-        reg.RANSACConvergenceCriteria(config.max_iteration, config.confidence))
+    with o3d_seeded(seed):
+        return reg.registration_ransac_based_on_feature_matching(
+            source, target, source_features, target_features, True, max_corr,
+            reg.TransformationEstimationPointToPoint(False), config.ransac_n,
+            [reg.CorrespondenceCheckerBasedOnEdgeLength(config.edge_length_similarity),
+             reg.CorrespondenceCheckerBasedOnDistance(max_corr)],
+            reg.RANSACConvergenceCriteria(config.max_iteration, config.confidence))
 
 
 # ------------------------------------------------------------------------------ colour ICP

@@ -9,6 +9,9 @@ Open3D) and color scale (uint8 on the wire, [0, 1] floats inside Open3D).
 
 from __future__ import annotations
 
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -20,6 +23,21 @@ from common.atomic import atomic_path
 from common.errors import ObjscanError
 from common.geometry import as_rigid_transform, rotate_vectors, transform_points
 from common.messages import PointCloud, RGBDFrame
+
+_O3D_RANDOM = threading.RLock()
+
+
+@contextmanager
+def o3d_seeded(seed: int) -> Iterator[None]:
+    """Seed Open3D's one global random generator and hold it for the block (a RANSAC call).
+
+    Why a lock: ``objscan reconstruct`` registers views in threads (``reconstruct.py``); two threads that
+    seed and then draw from the one generator would interleave and lose reproducibility. The seed is folded
+    into Open3D's 31-bit range.
+    """
+    with _O3D_RANDOM:
+        o3d.utility.random.seed(int(seed) & 0x7FFFFFFF)
+        yield
 
 
 class CloudError(ObjscanError):

@@ -27,6 +27,7 @@ import numpy as np
 import open3d as o3d
 from scipy.spatial import cKDTree
 
+from services.registration.cloud import o3d_seeded
 from services.registration.dynamic.fourpcs_common import as_xyz, check_transform
 
 F_SCORE_THRESHOLDS_M = (0.002, 0.005)
@@ -157,8 +158,8 @@ def _subsample(points: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarr
 
 def sample_mesh(mesh: o3d.geometry.TriangleMesh, n: int, *, seed: int = 0) -> np.ndarray:
     """``n`` points sampled uniformly by area on a mesh, reproducibly (Open3D's sampler is seeded)."""
-    o3d.utility.random.seed(seed)
-    return np.asarray(mesh.sample_points_uniformly(number_of_points=int(n)).points, dtype=np.float64)
+    with o3d_seeded(seed):
+        return np.asarray(mesh.sample_points_uniformly(number_of_points=int(n)).points, dtype=np.float64)
 
 
 def _principal_axes_candidates(model: np.ndarray, gt: np.ndarray) -> list[np.ndarray]:

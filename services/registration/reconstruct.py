@@ -13,7 +13,7 @@ import multiprocessing
 import os
 import time
 from collections.abc import Callable, Iterator
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
@@ -40,15 +40,19 @@ def reconstruct(
     progress: Progress | None = None,
     workers: int | None = None,
     dynamic: Any = None,
+    threads: int | None = None,
 ) -> dict[str, Any]:
     """Run static registration on every view of ``session_dir``; write PLYs and ``report.json`` to ``out_dir``.
 
     ``progress`` (optional) is called with a small dict after each view (``stage``, ``view``, ``of``,
     ``status``, ``seconds``) so a CLI can show progress. ``workers`` local processes share the work
     (views, then the dynamic stage's pair jobs); ``1`` runs everything here. The default
-    (``default_workers``) is one per core from 4 cores up and 1 below.
-    The result does not depend on ``workers``: each view and each pair job is computed by the same
-    deterministic function wherever it runs. ``dynamic`` (a ``DynamicConfig``) overrides the dynamic
+    (``default_workers``) is one per core from 4 cores up and 1 below. Without worker processes, ``threads``
+    threads of this process share the same work (default ``default_threads``: one per core; ``1``: serial):
+    Open3D releases the GIL in its registration calls, and threads cost no start-up.
+    The result does not depend on ``workers`` or ``threads``: each view and each pair job is computed by the
+    same deterministic function wherever it runs (Open3D's one random generator is held per RANSAC call,
+    ``cloud.o3d_seeded``). ``dynamic`` (a ``DynamicConfig``) overrides the dynamic
     stage's defaults. Returns the report (also written as JSON). Raises
     ``SessionFolderError`` only when the session itself is unreadable; per-view failures are in the report.
     """
@@ -56,13 +60,15 @@ def reconstruct(
     session = read_session(Path(session_dir))
     out = Path(out_dir)
     (out / "views").mkdir(parents=True, exist_ok=True)
-    t_start = time.perf_counter()
+    t_start, cpu_start = time.perf_counter(), time.process_time()
     views_report: list[dict[str, Any]] = []
     results: dict[int, StaticViewResult] = {}
     indices = [int(entry["index"]) for entry in session.views]
     turns = {int(e["index"]): float(e.get("commanded_turn_deg", 0.0)) for e in session.views}
     n_workers = max(1, min(workers or default_workers(), len(indices)))
-    with _worker_pool(n_workers) as pool:
+    n_threads = 1 if n_workers > 1 else max(1, min(threads or default_threads(), max(1, len(indices))))
+    with _worker_pool(n_workers) as processes, _thread_pool(n_threads) as in_threads:
+        pool: Executor | None = processes if processes is not None else in_threads
         jobs = [(session.path, index, session.scans(index), cfg) for index in indices]
         outcomes = pool.map(_register_one, jobs) if pool is not None else map(_register_one, jobs)
         for k, (index, item, result) in enumerate(outcomes):
@@ -82,8 +88,9 @@ def reconstruct(
             "profile": cfg.profile,
             "config": cfg.as_dict(),
             "workers": n_workers,
+            "threads": n_threads,
             "views": views_report,
-            "summary": _summary(views_report, time.perf_counter() - t_start),
+            "summary": _summary(views_report, time.perf_counter() - t_start, time.process_time() - cpu_start),
         }
         focal = session.data.get("import", {}).get("focal_calibration")
         if focal is not None:  # an imported sequence whose focal length was self-calibrated (importer/selfcal)
@@ -130,6 +137,25 @@ def _register_one(
         result = None
     item["seconds"] = round(time.perf_counter() - t0, 4)
     return index, item, result
+
+
+def default_threads() -> int:
+    """Threads worth running here when no worker processes are: one per core (at most 8).
+
+    Views and pair jobs are independent and Open3D releases the GIL inside its calls, so on the 2-core
+    machine two threads keep both cores busy without the ~5 CPU-s import a spawned worker pays.
+    """
+    return max(1, min(8, os.cpu_count() or 1))
+
+
+@contextmanager
+def _thread_pool(threads: int) -> Iterator[ThreadPoolExecutor | None]:
+    """``threads`` threads of this process, or None for one (everything runs in the caller)."""
+    if threads <= 1:
+        yield None
+        return
+    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="reconstruct") as pool:
+        yield pool
 
 
 @contextmanager
@@ -211,7 +237,10 @@ def _ground_truth(result: StaticViewResult, frames: list) -> dict[str, Any] | No
     }
 
 
-def _summary(views: list[dict[str, Any]], total_s: float) -> dict[str, Any]:
+def _summary(views: list[dict[str, Any]], total_s: float, cpu_s: float) -> dict[str, Any]:
+    """The static stage's figures. ``s_per_view_mean`` is each view's own wall time (in a thread it shares
+    the cores); ``stage_s_per_view`` is the stage's wall over the views (its throughput, the issue's "static
+    <= 1 s per view"); ``cpu_s`` the process CPU seconds of the stage (all threads), the load-independent one."""
     ok = [v for v in views if "error" not in v]
     gts = [v["ground_truth"] for v in ok if "ground_truth" in v]
     s = {
@@ -220,6 +249,8 @@ def _summary(views: list[dict[str, Any]], total_s: float) -> dict[str, Any]:
         "views_failed": [v["index"] for v in views if "error" in v],
         "total_s": round(total_s, 3),
         "s_per_view_mean": round(float(np.mean([v["seconds"] for v in views])), 4) if views else 0.0,
+        "stage_s_per_view": round(total_s / len(views), 4) if views else 0.0,
+        "cpu_s": round(cpu_s, 3),
         "paths": sorted({s["path"] for v in ok for s in v["scans"]}),
     }
     if gts:

@@ -84,3 +84,22 @@ def test_worker_processes_do_not_change_the_result(session, report, tmp_path):
         a = read_ply(tmp_path / "here" / "views" / f"view_{k:02d}.ply")
         b = read_ply(Path(report[0]) / "views" / f"view_{k:02d}.ply")
         assert np.array_equal(a.xyz, b.xyz) and np.array_equal(a.rgb, b.rgb)
+
+
+def test_threaded_static_stage_gives_the_serial_poses(session, tmp_path):
+    """Views registered by two threads of this process give the same poses and clouds as one by one."""
+    serial = reconstruct(session, tmp_path / "serial", workers=1, threads=1)
+    threaded = reconstruct(session, tmp_path / "threaded", workers=1, threads=2)
+    assert serial["threads"] == 1 and threaded["threads"] == 2
+
+    def figures(view: dict) -> dict:
+        return {k: v for k, v in view.items() if k not in ("seconds", "timings_s")}
+
+    assert [figures(v) for v in threaded["views"]] == [figures(v) for v in serial["views"]]
+    for k in (0, 1):
+        poses = [np.asarray(s["T_base_camera"]) for s in threaded["views"][k]["scans"]]
+        assert all(np.array_equal(a, np.asarray(b["T_base_camera"]))
+                   for a, b in zip(poses, serial["views"][k]["scans"], strict=True))
+        a = read_ply(tmp_path / "serial" / "views" / f"view_{k:02d}.ply")
+        b = read_ply(tmp_path / "threaded" / "views" / f"view_{k:02d}.ply")
+        assert np.array_equal(a.xyz, b.xyz) and np.array_equal(a.rgb, b.rgb)

@@ -1,6 +1,7 @@
 """The ``default`` profile's alignment: the arm's believed poses as the prior, refined pair by pair.
 
-Per pair (each scan against scan 0): dense RGB-D odometry from the prior (full-resolution image pyramid), checked
+Per pair (each scan against scan 0): dense RGB-D odometry (full-resolution image pyramid) from the prior, seeded by
+the reverse odometry on coarser images (``reverse_seed``), checked
 (fitness, inlier RMSE, size of the correction); a pair that fails tries GICP from the prior, and only then
 global registration (FPFH RANSAC on the table-free clouds, refined, scored on the table-free clouds).
 Optional pose graph with the edges to scan 0 as the spanning tree. See docs/static-registration.md.
@@ -36,12 +37,22 @@ class PriorScan:
     check: o3d.geometry.PointCloud  # ``check_voxel`` copy the pair check measures on
     intrinsic: o3d.camera.PinholeCameraIntrinsic  # of the decimated image
     make_image: Callable[[], o3d.geometry.RGBDImage] = field(repr=False)
+    make_seed_image: Callable[[], tuple[o3d.geometry.RGBDImage, o3d.camera.PinholeCameraIntrinsic]] | None = field(
+        default=None, repr=False
+    )
     _table_free: tuple[o3d.geometry.PointCloud, o3d.geometry.PointCloud] | None = field(default=None, repr=False)
 
     @cached_property
     def image(self) -> o3d.geometry.RGBDImage:
         """The decimated RGB-D image for odometry (built on first use)."""
         return self.make_image()
+
+    @cached_property
+    def seed_image(self) -> tuple[o3d.geometry.RGBDImage, o3d.camera.PinholeCameraIntrinsic]:
+        """The coarser RGB-D image (and its intrinsics) of the reverse seed pass (built on first use)."""
+        if self.make_seed_image is None:
+            raise ValueError("this scan was prepared without a seed image (odometry_seed_iterations is None)")
+        return self.make_seed_image()
 
     @cached_property
     def levels(self) -> list[o3d.geometry.PointCloud]:
@@ -97,9 +108,40 @@ def _odometry(src: PriorScan, tgt: PriorScan, init: np.ndarray, cfg: StaticConfi
     )
 
 
+def reverse_seed(src: PriorScan, tgt: PriorScan, prior: np.ndarray, cfg: StaticConfig) -> np.ndarray:
+    """The forward odometry's start: the inverse of the reverse odometry (target onto source) run from the
+    inverted prior on the coarser seed images, or the prior itself when that pass fails or jumps further
+    than the arm's error can explain.
+
+    Why: the two directions take their correspondences from different images, so they stall in different
+    places; from a prior several mm off the forward run alone stopped in a nearby minimum on 3 of 12 milk
+    pairs (up to 8 mm) where the reverse run reached the true one's basin, and the forward run from there
+    converges (docs/static-registration.md, BENCHMARKS.md "session 6")."""
+    if cfg.odometry_seed_iterations is None:
+        return prior
+    (src_img, intrinsic), (tgt_img, _) = src.seed_image, tgt.seed_image
+    ok, T_rev = rgbd_odometry(
+        tgt_img,
+        src_img,
+        intrinsic,
+        invert(prior),
+        iterations=cfg.odometry_seed_iterations,
+        max_depth_diff=cfg.odometry_max_depth_diff,
+        depth_min=cfg.depth_min,
+        depth_max=cfg.depth_max,
+        hybrid=cfg.odometry_hybrid,
+    )
+    if not ok:
+        return prior
+    seed = invert(T_rev)
+    dt, dr = transform_error(seed, prior)
+    return seed if dt <= cfg.max_correction_m and dr <= cfg.max_correction_deg else prior
+
+
 def register_pair(src: PriorScan, tgt: PriorScan, prior: np.ndarray, cfg: StaticConfig, seed: int) -> PairOutcome:
-    """Local first (RGB-D odometry, then GICP, both from the arm's prior), global only when both fail."""
-    ok, T = _odometry(src, tgt, prior, cfg)
+    """Local first (RGB-D odometry from the reverse seed, then GICP from the arm's prior), global only when
+    both fail. The check always measures the correction against the arm's prior."""
+    ok, T = _odometry(src, tgt, reverse_seed(src, tgt, prior, cfg), cfg)
     res, passed = _check(src.check, tgt.check, T, prior, cfg)
     if ok and passed:
         return PairOutcome(T, "local", "rgbd_odometry", res, True)
@@ -153,12 +195,17 @@ def _global(src: PriorScan, tgt: PriorScan, cfg: StaticConfig, seed: int, candid
 
 def _prepare(scan: Scan, frame: RGBDFrame, cfg: StaticConfig) -> PriorScan:
     pcd = to_o3d(scan.pts_cam.xyz, scan.pts_cam.rgb)
+    seed_step = cfg.odometry_step * cfg.odometry_seed_step
     return PriorScan(
         cfg=cfg,
         pcd=pcd,
         check=downsample(pcd, cfg.check_voxel, normals=False),
         intrinsic=pinhole(frame, cfg.odometry_step),
         make_image=lambda: rgbd_image(frame, step=cfg.odometry_step, depth_min=cfg.depth_min, depth_max=cfg.depth_max),
+        make_seed_image=None if cfg.odometry_seed_iterations is None else lambda: (
+            rgbd_image(frame, step=seed_step, depth_min=cfg.depth_min, depth_max=cfg.depth_max),
+            pinhole(frame, seed_step),
+        ),
     )
 
 

@@ -11,7 +11,7 @@ import numpy as np
 import open3d as o3d
 
 from common.messages import RGBDFrame
-from services.registration.cloud import CloudError, FramePoints, frame_points
+from services.registration.cloud import CloudError, FramePoints, frame_points, o3d_seeded
 
 from .config import StaticConfig
 from .errors import BadFramesError, EmptyDepthError
@@ -97,8 +97,8 @@ def strip_table(pcd: o3d.geometry.PointCloud, cfg: StaticConfig, seed: int) -> o
     coarse = pcd.voxel_down_sample(cfg.plane_voxel)
     if len(coarse.points) < 3:
         return pcd
-    o3d.utility.random.seed(int(seed))
-    model, _ = coarse.segment_plane(cfg.plane_distance, 3, cfg.plane_iterations)
+    with o3d_seeded(seed):
+        model, _ = coarse.segment_plane(cfg.plane_distance, 3, cfg.plane_iterations)
     n = np.asarray(model[:3])
     dist = np.abs(np.asarray(pcd.points) @ n + model[3]) / np.linalg.norm(n)
     kept = pcd.select_by_index(np.flatnonzero(dist > cfg.plane_distance))

@@ -16,6 +16,7 @@ import numpy as np
 import open3d as o3d
 
 from common.messages import Plane
+from services.registration.cloud import o3d_seeded
 
 from .errors import NoTableError
 
@@ -86,8 +87,8 @@ def find_planes(
     for k in range(max_planes):
         if len(search.points) < max(3, min_search):
             break
-        o3d.utility.random.seed(int(seed) + k)
-        model, inl = search.segment_plane(distance_threshold=distance, ransac_n=3, num_iterations=iterations)
+        with o3d_seeded(int(seed) + k):
+            model, inl = search.segment_plane(distance_threshold=distance, ransac_n=3, num_iterations=iterations)
         if len(inl) < min_search:
             break
         n = np.asarray(model[:3], dtype=np.float64)
