@@ -44,6 +44,7 @@ from common.errors import ObjscanError, WireError
 from common.log import event, request_id, setup_logging
 from common.memory import tune_malloc
 from common.messages import Error, Health
+from common.open3d_threads import limit_open3d_threads
 from common.zenoh_config import ZenohSettings, wait_connected
 
 log = logging.getLogger("objscan.runtime")
@@ -447,6 +448,7 @@ def run_service(factory: Callable[[], Service]) -> None:
     """Run a service until SIGINT/SIGTERM; exits non-zero if it failed to start."""
     tune_malloc()
     service = factory()
+    limit_open3d_threads(only_if_imported=True)  # after the service's imports: reproducible registrations
     setup_logging(service.name, service.instance)
 
     async def main() -> None:

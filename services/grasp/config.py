@@ -131,7 +131,12 @@ class GraspPlannerConfig:
     """The paper's g: each pad box centre sits g/2 beyond its contact along the grasp line (padding
     for motion errors)."""
     table_clearance: float = 0.005
-    """Minimum gap kept between the hand and the table (also used to clamp top-down depth)."""
+    """Minimum gap kept between the hand and the table."""
+    top_down_tip_clearance: float = 0.008
+    """Gap kept below a top-down TCP's pads (at the TCP's level) when choosing how deep it goes: the
+    RH-P12-RN's finger links closed to ~2 cm reach 3 mm past the pad box (the arm's collision meshes: a
+    straight-down TCP clears the table from 23 mm up, the pad box from 20 mm), and a registered table plane
+    was 2.7 mm below the arm's table (cream cheese, issue 16 session 6)."""
     check_palm: bool = True
     """Also test a palm box against the table for frontal grasps (the paper tests the pads only)."""
     object_collision_min_points: int = 3

@@ -267,8 +267,16 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
         if n_hit:
             rej.add("collides_with_object", example={**example, "box": which, "points": n_hit})
             continue
-        mid_height = float(0.5 * (p1 + p2) @ inp.up + inp.offset)
-        depth = float(np.clip(mid_height - cfg.table_clearance, 0.0, cfg.grasp_depth))
+        # the TCP goes where the pads were checked: pushed past the contacts only as far as the pads' lowest
+        # corner keeps the clearance, or held back by the rise (a short box: the pushed pads, and the finger
+        # links around them, met the table in the arm's check although the pads at the contacts cleared it)
+        # (both pads ride level with the TCP along the approach, not each at its own contact: on a scan the
+        # two contacts of a 5 cm box were 6 mm apart in height, and the lower pad decides)
+        x = R[:, 0]
+        mid = 0.5 * (p_plus + p_minus)
+        level = pad_boxes(R, p_plus + float((mid - p_plus) @ x) * x, p_minus + float((mid - p_minus) @ x) * x, cfg)
+        lowest_level = min(float((b.corners() @ inp.up).min()) for b in level) + inp.offset
+        depth = top_down_depth(lowest_level, -float(x @ inp.up), cfg)
         n_pair = np.array([pair.n_j, pair.n_i] if swapped else [pair.n_i, pair.n_j])
         out.append(_make_grasp("top_down", axis, pair, R, np.array([p_plus, p_minus]), n_pair, inp,
                                depth, cfg.top_down_offsets_deg, center, cfg, boxes,
@@ -279,6 +287,16 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
 
 
 # --------------------------------------------------------------------------------------- helpers
+
+def top_down_depth(lowest: float, descent: float, cfg: GraspPlannerConfig) -> float:
+    """How far (m) a top-down TCP goes past the contacts' midpoint along the approach, negative = held back.
+
+    ``lowest``: height above the table of the pads' lowest corner with the pads level with the contacts'
+    midpoint; ``descent``: how much of the approach points down (-x . up). At most ``grasp_depth``; never so
+    far that that corner comes within ``top_down_tip_clearance`` of the table."""
+    room = (lowest - cfg.top_down_tip_clearance) / max(descent, 1e-6)
+    return float(min(cfg.grasp_depth, room))
+
 
 def _ranked_pairs(xyz: np.ndarray, normals: np.ndarray, up: np.ndarray, frame: ObjectFrame,
                   cfg: GraspPlannerConfig, kind: str, rej: Rejections, n_observed: int | None = None

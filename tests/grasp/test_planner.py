@@ -266,3 +266,30 @@ def test_planning_is_deterministic():
     b = plan_grasps(p, n, S.table_plane())
     assert [g.rank for g in a.grasps] == [g.rank for g in b.grasps]
     assert np.array_equal(a.object_center, b.object_center)
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.001])
+@pytest.mark.parametrize("yaw_deg", [0.0, 30.0, 60.0, 90.0])
+def test_a_top_down_tcp_puts_the_pads_where_they_cleared_the_table(yaw_deg, noise):
+    """The thin cream-cheese box standing on edge (10.4 x 2.4 x 5.3 cm), top-down with the grasp service's
+    1 cm push: its contacts sit 2-3 cm up, so a pad (4 cm long) at the contacts clears the table but one
+    pushed 1 cm further does not. The planner checked the pads at the contacts and then pushed the TCP
+    anyway; the arm then refused every turn of it at view 5-8 ("gripper_link_r2 hits table"). Both pads
+    ride at the TCP's level, not each at its own contact's (contacts 6 mm apart in height on a scan)."""
+    from services.grasp.service import GraspService
+
+    cfg = GraspPlannerConfig(**{**GraspService.planner_config().__dict__, "mode": "top_down"})
+    p, n = S.box((0.104, 0.024, 0.053), yaw_deg=yaw_deg, view_from=S.scan_cameras(), noise=noise)
+    plan = plan_grasps(p, n, S.table_plane(), cfg)
+    assert plan.grasps, plan.explain()
+    for g in plan.grasps:
+        T = g.poses["grasp"]
+        x = T[:3, 0]
+        pushed = float((T[:3, 3] - g.contacts.mean(axis=0)) @ x)  # how far the TCP went past the contacts
+        for name in ("pad_plus", "pad_minus"):
+            pad = g.collision_boxes[name]
+            # both fingers move with the TCP: the pad sits level with it along the approach
+            at_tcp = OrientedBox(pad.center + float((T[:3, 3] - pad.center) @ x) * x, pad.rotation,
+                                 pad.half_extents)
+            assert float(at_tcp.corners()[:, 2].min()) >= cfg.top_down_tip_clearance - 1e-6, (name, pushed)
+        assert pushed <= cfg.grasp_depth + 1e-9
