@@ -48,7 +48,8 @@ Which path made each row (``path`` in the JSON, ``ROW_PATHS``; ``label`` says it
 from ``$OBJSCAN_BENCH_SESSION_DIR`` when there), rows no_region, pose_graph, auto, oracle and
 paper:no_region. ``run()``: every HOPE object, the three profiles, every row (the four paper rows included);
 ``$OBJSCAN_BENCH_PAPER_OBJECTS`` (comma-separated) limits the paper rows to those objects (the paper pair
-path costs tens of CPU seconds per pair).
+path costs seconds to tens of seconds per pair), ``$OBJSCAN_BENCH_OBJECTS`` and ``$OBJSCAN_BENCH_PROFILES``
+(comma-separated) the objects and profiles (a partial run says so in its ``objects`` and ``profiles``).
 
 Recorded sessions (issue 16): with ``$OBJSCAN_BENCH_SESSIONS`` (comma-separated session folders of
 ``objscan scan``) only those sessions are measured (``physics_sessions``), rows as in ``--quick``.
@@ -417,8 +418,12 @@ def run(quick: bool = False) -> dict:
     sessions = _env_list("OBJSCAN_BENCH_SESSIONS")
     if sessions:
         return {"physics_sessions": [measure_session(p) for p in sessions]}
-    objects = ["milk"] if quick else hope_names()
-    profiles = ["realistic", ACQUIRED_PROFILE] if quick else ["realistic", "hand-turned", ACQUIRED_PROFILE]
+    objects = _env_list("OBJSCAN_BENCH_OBJECTS") or (["milk"] if quick else hope_names())
+    profiles = _env_list("OBJSCAN_BENCH_PROFILES") or (
+        ["realistic", ACQUIRED_PROFILE] if quick else ["realistic", "hand-turned", ACQUIRED_PROFILE])
+    unknown = [p for p in profiles if p not in TURNS]
+    if unknown:
+        raise ValueError(f"OBJSCAN_BENCH_PROFILES: unknown {unknown}; known: {sorted(TURNS)}")
     rows = QUICK_ROWS if quick else ROWS + PAPER_ROWS
     paper_objects = set(_env_list("OBJSCAN_BENCH_PAPER_OBJECTS")) or None
     tmp = tempfile.mkdtemp(prefix="objscan-bench-dynamic-")
