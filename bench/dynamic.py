@@ -49,7 +49,8 @@ from ``$OBJSCAN_BENCH_SESSION_DIR`` when there), rows no_region, pose_graph, aut
 paper:no_region. ``run()``: every HOPE object, the three profiles, every row (the four paper rows included);
 ``$OBJSCAN_BENCH_PAPER_OBJECTS`` (comma-separated) limits the paper rows to those objects (the paper pair
 path costs seconds to tens of seconds per pair), ``$OBJSCAN_BENCH_OBJECTS`` and ``$OBJSCAN_BENCH_PROFILES``
-(comma-separated) the objects and profiles (a partial run says so in its ``objects`` and ``profiles``).
+(comma-separated) the objects and profiles (a partial run says so in its ``objects`` and ``profiles``);
+``$OBJSCAN_BENCH_ROW_LOG`` appends each row as JSON lines as soon as it is measured.
 
 Recorded sessions (issue 16): with ``$OBJSCAN_BENCH_SESSIONS`` (comma-separated session folders of
 ``objscan scan``) only those sessions are measured (``physics_sessions``), rows as in ``--quick``.
@@ -119,6 +120,20 @@ def _views(obj: str, profile: str, seed: int):
     t0 = time.perf_counter()
     views = static_views(frames)
     return views, np.asarray(frames[0][0].meta["T_base_object_true"]), time.perf_counter() - t0, frames
+
+
+def log_row(where: str, row: str, figures: dict) -> None:
+    """Append one measured row to ``$OBJSCAN_BENCH_ROW_LOG`` (JSON lines) when set: a long run cut off on a
+    loaded machine keeps the rows it finished (the JSON is written only at the end)."""
+    path = os.environ.get("OBJSCAN_BENCH_ROW_LOG", "").strip()
+    if not path:
+        return
+    import json
+
+    line = {"where": where, "row": row, "t": time.strftime("%H:%M:%S", time.gmtime()),
+            "load_average": [round(v, 2) for v in os.getloadavg()], **figures}
+    with open(path, "a") as fh:
+        fh.write(json.dumps(line, default=float) + "\n")
 
 
 def _static_view(args: tuple) -> object:
@@ -191,7 +206,8 @@ def paper_static(frames: list, cache_dir=None) -> tuple[list, dict]:  # noqa: AN
     return views, {**timing, "static_cached": False}
 
 
-def paper_rows(frames: list, gt: np.ndarray, rows: tuple[str, ...], cache_dir=None) -> dict:  # noqa: ANN001
+def paper_rows(frames: list, gt: np.ndarray, rows: tuple[str, ...], cache_dir=None,  # noqa: ANN001
+               where: str = "") -> dict:
     """The paper-faithful rows of ``rows`` on these frames: paper static profile, then paper pairs (one pair
     per worker process; what each computes is unchanged)."""
     from services.registration.dynamic.model import DynamicConfig, build_model, process_pool_map
@@ -211,6 +227,7 @@ def paper_rows(frames: list, gt: np.ndarray, rows: tuple[str, ...], cache_dir=No
         out[row] = {"chamfer_mm": _chamfer(m.xyz, gt), "seconds": time.perf_counter() - t, "cpu_s": _cpu() - c,
                     "workers": workers(), **timing, "loop_rotation_deg": m.loop_closure["rotation_deg"],
                     "paths": [e.path for e in m.edges], "label": ROW_LABELS[row], "path": ROW_PATHS[row]}
+        log_row(where, row, out[row])
     return out
 
 
@@ -266,9 +283,10 @@ def measure_session(session, rows: tuple[str, ...] = SESSION_ROWS, cache_dir=Non
     views, gt, physics, frames = _session_views(session)
     out: dict = {"session": str(session), "views": len(views), "physics": physics,
                  "turns": f"{PHYSICS}: the session's frames ({physics})"}
-    out.update(paper_rows(frames, gt, rows, cache_dir))
+    out.update(paper_rows(frames, gt, rows, cache_dir, where=str(session)))
     for row in (r for r in rows if r not in PAPER_ROWS):
         out[row] = fast_row(views, gt, row)
+        log_row(str(session), row, out[row])
     if "auto" in out and "oracle" in out:
         out["auto_over_oracle"] = out["auto"]["chamfer_mm"] / out["oracle"]["chamfer_mm"]
     return out
@@ -340,9 +358,10 @@ def measure_object(obj: str, profile: str, seed: int = 0, rows: tuple[str, ...] 
     out["reconstruct_one_process_cpu_s"] = cpu["s"]
     out["reconstruct_global_fallbacks"] = cpu["global_fallbacks"]
     out["reconstruct_s"] = min(out["reconstruct_one_process_s"], out["reconstruct_pooled_s"])
-    out.update(paper_rows(frames, gt, rows, cache_dir))
+    out.update(paper_rows(frames, gt, rows, cache_dir, where=f"{obj} {profile}"))
     for row in (r for r in rows if r not in PAPER_ROWS):
         out[row] = fast_row(views, gt, row)
+        log_row(f"{obj} {profile}", row, out[row])
     return out
 
 

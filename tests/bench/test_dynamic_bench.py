@@ -127,3 +127,15 @@ def test_the_paper_static_stage_is_cached_per_frames_and_recomputed_for_other_fr
     other[1][0].depth[4, 4] += 1  # one pixel differs
     dynamic.paper_static(other, tmp_path)
     assert calls == [2, 2]  # other frames: not served from the cache
+
+
+def test_each_row_is_logged_as_measured_when_asked(tmp_path, monkeypatch):
+    log = tmp_path / "rows.jsonl"
+    dynamic.log_row("milk realistic", "auto", {"chamfer_mm": 1.0})  # no log asked for: nothing written
+    assert not log.exists()
+    monkeypatch.setenv("OBJSCAN_BENCH_ROW_LOG", str(log))
+    dynamic.log_row("milk realistic", "auto", {"chamfer_mm": 1.0, "path": "fast"})
+    dynamic.log_row("/s/milk", "paper:region", {"error": "no_table"})
+    lines = [json.loads(x) for x in log.read_text().splitlines()]
+    assert [(x["where"], x["row"]) for x in lines] == [("milk realistic", "auto"), ("/s/milk", "paper:region")]
+    assert lines[0]["chamfer_mm"] == 1.0 and lines[1]["error"] == "no_table" and len(lines[0]["load_average"]) == 3
