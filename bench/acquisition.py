@@ -1,7 +1,8 @@
 """``objscan bench acquisition``: a whole simulated acquisition through every service, timed and scored.
 
 Runs the main job (``objscan scan``) on the twin: 12 views of a HOPE object (``quick``: 4 views) under the
-``robot-turned`` profile, and reports the time, the grasp attempts and re-scans it took, and the model's
+``realistic`` profile (the benchmarks' default twin, issue 15; ``$OBJSCAN_BENCH_PROFILE`` names another, e.g.
+``robot-turned`` as measured before), and reports the time, the grasp attempts and re-scans it took, and the model's
 accuracy against the ground-truth mesh (Chamfer, one-sided accuracy and completeness, F-score).
 
 The twin's grasp/set-down model is ``$OBJSCAN_BENCH_PHYSICS`` (``mujoco``, the default as for ``objscan
@@ -13,7 +14,8 @@ is scanned: those sessions are scored from their ``report.json`` and ``journal.j
 One object (the default): scanned twice in the same run, with the incremental model (pair registrations
 while the arm turns, the default) and without it (every pair at the end, the old path) as the baseline. The
 headline figure is ``model_ready_s_after_last_view``: from the last view's last scan saved to the model saved
-(target <= 5 s).
+(target <= 5 s). The machine may be shared: each acquisition records the load average before and after
+and the CPU seconds of the services it started (``cpu_s``), beside the wall times.
 """
 
 from __future__ import annotations
@@ -31,9 +33,19 @@ from common.launcher import ServiceGroup
 from common.messages import Request
 from services.cell import cell_specs
 
+PROFILE = "realistic"
+
+
+def _children_cpu() -> float:
+    import resource
+
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
 
 def acquire(out: Path, *, object_name: str, views: int, profile: str, seed: int, log_dir: Path,
             physics: str = "mujoco", incremental: bool = True) -> dict[str, Any]:
+    load_before, c0 = os.getloadavg(), _children_cpu()
     with ServiceGroup(log_dir=log_dir) as group:
         # the orchestrator writes sessions only under its --sessions root: the session's parent folder
         group.launch(cell_specs(extra_args={"orchestrator": ["--sessions", str(Path(out).resolve().parent)]}),
@@ -49,7 +61,9 @@ def acquire(out: Path, *, object_name: str, views: int, profile: str, seed: int,
                 break
             time.sleep(1.0)
         seconds = time.perf_counter() - t0
-    return score_session(out, seconds=seconds, status=s.get("status"), error=s.get("last_error"))
+    return {**score_session(out, seconds=seconds, status=s.get("status"), error=s.get("last_error")),
+            "cpu_s": round(_children_cpu() - c0, 1), "load_average_before": [round(v, 2) for v in load_before],
+            "load_average_after": [round(v, 2) for v in os.getloadavg()]}
 
 
 def true_turns(out: Path) -> dict[str, Any]:
@@ -107,18 +121,19 @@ def run(quick: bool = False) -> dict[str, Any]:
     if sessions:
         return {"objects": [score_session(Path(p.strip())) for p in sessions]}
     physics = os.environ.get("OBJSCAN_BENCH_PHYSICS", "mujoco")
+    profile = os.environ.get("OBJSCAN_BENCH_PROFILE", "").strip() or PROFILE
     names = [n.strip() for n in os.environ.get("OBJSCAN_BENCH_OBJECTS", "milk").split(",") if n.strip()]
     root = Path(tempfile.mkdtemp(prefix="objscan-bench-acq-"))
     views = 4 if quick else 12
     if len(names) > 1:
-        return {"objects": [acquire(root / f"session_{i}", object_name=name, views=views, profile="robot-turned",
+        return {"objects": [acquire(root / f"session_{i}", object_name=name, views=views, profile=profile,
                                     seed=1, log_dir=root / f"logs_{i}", physics=physics)
                             for i, name in enumerate(names)]}
     runs = {}
     for variant, incremental in (("incremental", True), ("end_of_run", False)):
-        runs[variant] = acquire(root / variant, object_name=names[0], views=views, profile="robot-turned", seed=1,
+        runs[variant] = acquire(root / variant, object_name=names[0], views=views, profile=profile, seed=1,
                                 log_dir=root / f"logs-{variant}", physics=physics, incremental=incremental)
     inc, base = runs["incremental"], runs["end_of_run"]
     return {**inc, "model_ready_s_after_last_view_end_of_run": base["model_ready_s_after_last_view"],
             "target_s": 5.0, "seconds_total_end_of_run": base["seconds_total"],
-            "chamfer_mm_end_of_run": base["chamfer_mm"], "runs": runs}
+            "chamfer_mm_end_of_run": base["chamfer_mm"], "profile": profile, "runs": runs}
