@@ -67,7 +67,7 @@ class FindConfig:
     voxel: float = 0.004
     inlier_distance: float = 0.006
     upright: bool = True
-    yaw_steps: int = 8
+    yaw_steps: int = 16  # 22.5 deg apart: at 45 deg a can's colour ICP basin (about its yaw) can miss every start
     ransac_trials: int = 1
     features: FeatureMatchConfig = FeatureMatchConfig()  # FPFH at 5 voxels, RANSAC's iterations
     icp_iterations: int = 30
