@@ -74,7 +74,7 @@ def _assert_same_model(cmp_: dict) -> None:
     at most 2 of 23586 normals beyond 1e-5, the worst 0.017)."""
     assert cmp_["points_recorded"] == cmp_["points_replayed"], cmp_
     assert cmp_["rgb_identical"], cmp_
-    assert cmp_["xyz_identical"] or cmp_["max_pointwise_diff_mm"] <= 1e-4, cmp_  # 0.1 um: below float32 rounding at 0.5 m (~3e-5 mm)
+    assert cmp_["xyz_identical"] or cmp_["max_pointwise_diff_mm"] <= 1e-4, cmp_  # 0.1 um < float32 rounding
     assert cmp_.get("normals_fraction_beyond_1e-5", 0.0) <= 1e-3, cmp_
 
 
