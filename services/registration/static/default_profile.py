@@ -55,6 +55,13 @@ class PriorScan:
         return self.make_seed_image()
 
     @cached_property
+    def object(self) -> o3d.geometry.PointCloud | None:
+        """The scan without its table at ``object_voxel``, with normals (the object refinement's cloud), or None
+        when too little is left to refine on."""
+        obj = downsample(strip_table(self.pcd, self.cfg, self.cfg.seed), self.cfg.object_voxel, toward=np.zeros(3))
+        return obj if len(obj.points) >= self.cfg.object_min_points else None
+
+    @cached_property
     def levels(self) -> list[o3d.geometry.PointCloud]:
         """The GICP pyramid (``local_voxels``), only when odometry fails its check."""
         return [downsample(self.pcd, v, toward=np.zeros(3)) for v in self.cfg.local_voxels]
@@ -138,18 +145,54 @@ def reverse_seed(src: PriorScan, tgt: PriorScan, prior: np.ndarray, cfg: StaticC
     return seed if dt <= cfg.max_correction_m and dr <= cfg.max_correction_deg else prior
 
 
+def refine_on_object(src: PriorScan, tgt: PriorScan, T: np.ndarray, prior: np.ndarray, cfg: StaticConfig
+                     ) -> np.ndarray | None:
+    """``T`` refined by point-to-plane ICP on the table-free clouds, or None when that does not raise the object
+    fitness by ``object_min_gain`` (or jumps further than the arm's error can explain).
+
+    Why: the table fills most of a scan, so the odometry and the check both weigh the table, and a plane lets
+    the camera slide and tilt along it; a result stalled off the true pose can score as well as the truth on
+    the whole scan while the object, the only thing the view is for, is visibly doubled (config.py)."""
+    if not cfg.object_refine or src.object is None or tgt.object is None:
+        return None
+    before = pw.evaluate(src.object, tgt.object, T, cfg.object_score_corr).fitness
+    refined = T
+    for corr in cfg.object_corr:
+        refined = pw.icp_point_to_plane(src.object, tgt.object, corr, refined, cfg.object_iterations).T
+    after = pw.evaluate(src.object, tgt.object, refined, cfg.object_score_corr).fitness
+    dt, dr = transform_error(refined, prior)
+    if after < before + cfg.object_min_gain or dt > cfg.max_correction_m or dr > cfg.max_correction_deg:
+        return None
+    return refined
+
+
+def _local(src: PriorScan, tgt: PriorScan, T: np.ndarray, prior: np.ndarray, method: str, cfg: StaticConfig
+           ) -> PairOutcome | None:
+    """The verified local outcome of ``T`` (object-refined when that helps), or None if it fails the check."""
+    res, passed = _check(src.check, tgt.check, T, prior, cfg)
+    if not passed:
+        return None
+    refined = refine_on_object(src, tgt, T, prior, cfg)
+    if refined is not None:
+        res_r, passed_r = _check(src.check, tgt.check, refined, prior, cfg)
+        if passed_r:
+            return PairOutcome(refined, "local", f"{method}+object_icp", res_r, True)
+    return PairOutcome(T, "local", method, res, True)
+
+
 def register_pair(src: PriorScan, tgt: PriorScan, prior: np.ndarray, cfg: StaticConfig, seed: int) -> PairOutcome:
-    """Local first (RGB-D odometry from the reverse seed, then GICP from the arm's prior), global only when
-    both fail. The check always measures the correction against the arm's prior."""
+    """Local first (RGB-D odometry from the reverse seed, then GICP from the arm's prior), each refined on the
+    object when that helps, global only when both fail. The check always measures the correction against the
+    arm's prior."""
     ok, T = _odometry(src, tgt, reverse_seed(src, tgt, prior, cfg), cfg)
-    res, passed = _check(src.check, tgt.check, T, prior, cfg)
-    if ok and passed:
-        return PairOutcome(T, "local", "rgbd_odometry", res, True)
-    candidates = [PairOutcome(T, "local", "rgbd_odometry", res, False)] if ok else []
+    if ok and (out := _local(src, tgt, T, prior, "rgbd_odometry", cfg)) is not None:
+        return out
+    candidates = [PairOutcome(T, "local", "rgbd_odometry", _check(src.check, tgt.check, T, prior, cfg)[0], False)
+                  ] if ok else []
     T = _gicp_pyramid(src, tgt, cfg, prior)
-    res, passed = _check(src.check, tgt.check, T, prior, cfg)
-    if passed:
-        return PairOutcome(T, "local", "icp", res, True)
+    if (out := _local(src, tgt, T, prior, "icp", cfg)) is not None:
+        return out
+    res, _ = _check(src.check, tgt.check, T, prior, cfg)
     candidates.append(PairOutcome(T, "local", "icp", res, False))
     return _global(src, tgt, cfg, seed, candidates)
 
@@ -209,20 +252,30 @@ def _prepare(scan: Scan, frame: RGBDFrame, cfg: StaticConfig) -> PriorScan:
     )
 
 
+def crop_to_roi(scans: list[Scan], seed_base: np.ndarray | None, cfg: StaticConfig) -> None:
+    """Keep each scan's points within the ROI around the seed (in place; a scan left too small is kept whole)."""
+    for s in scans:
+        if seed_base is not None and cfg.roi_radius is not None:
+            keep = roi_mask(transform_points(s.T_believed, s.pts_cam.xyz), seed_base, cfg)
+            if keep.sum() >= MIN_SCAN_POINTS:
+                s.pts_cam = s.pts_cam.subset(keep)
+
+
+def prepare(scans: list[Scan], frames: list[RGBDFrame], cfg: StaticConfig) -> list[PriorScan]:
+    """Each scan's clouds and images for the prior-seeded path (what only the fallbacks need, lazily)."""
+    return [_prepare(s, f, cfg) for s, f in zip(scans, frames, strict=True)]
+
+
 def register(
     scans: list[Scan], frames: list[RGBDFrame], seed_base: np.ndarray | None, cfg: StaticConfig, sw: Stopwatch
 ) -> tuple[list[np.ndarray], list[PairOutcome | None]]:
     """Camera poses relative to scan 0 (T_c0_cj), from the arm's poses refined pairwise."""
     with sw("roi"):
-        for s in scans:
-            if seed_base is not None and cfg.roi_radius is not None:
-                keep = roi_mask(transform_points(s.T_believed, s.pts_cam.xyz), seed_base, cfg)
-                if keep.sum() >= MIN_SCAN_POINTS:
-                    s.pts_cam = s.pts_cam.subset(keep)
+        crop_to_roi(scans, seed_base, cfg)
     if len(scans) == 1:
         return [np.eye(4)], [None]
     with sw("preprocess"):
-        data = [_prepare(s, f, cfg) for s, f in zip(scans, frames, strict=True)]
+        data = prepare(scans, frames, cfg)
     with sw("register"):
         edges, outcomes = [], {}
         for j in range(1, len(scans)):

@@ -30,7 +30,7 @@ class ScanResult:
     T_base_camera: np.ndarray  # corrected
     T_base_camera_believed: np.ndarray
     path: str
-    method: str  # anchor | rgbd_odometry | icp | fpfh+icp | paper
+    method: str  # anchor | rgbd_odometry | icp (either + "+object_icp") | fpfh+icp | paper
     fitness: float
     inlier_rmse: float
     verified: bool
@@ -62,7 +62,7 @@ class PairOutcome:
 
     T: np.ndarray
     path: str  # "local" | "global" | "paper"
-    method: str  # "rgbd_odometry" | "icp" | "fpfh+icp" | "paper"
+    method: str  # "rgbd_odometry" | "icp" (either + "+object_icp") | "fpfh+icp" | "paper"
     check: PairResult
     verified: bool
 
