@@ -160,6 +160,32 @@ def test_fast_pair_recovers_the_true_neighbour_transform(milk_scan, milk_prepare
         assert res.path in ("prior", "global") and res.fitness > 0.7
 
 
+def test_colour_icp_runaway_is_guarded_by_point_to_plane(milk_scan, milk_prepared):
+    """Two views whose colours disagree with their geometry (here the source's colours displaced along the
+    carton, as a colour-to-depth misregistration or a lighting change does): colour ICP started at the true
+    transform runs away (a realistic milk acquisition's edge 11 -> 10 went to a 38 deg tilt this way), the
+    guarded refinement keeps the true fit, and the whole pair registration lands on it."""
+    from services.registration.dynamic.pair import _evaluation_clouds, fast_local
+    from services.registration.dynamic.preprocess import Cloud
+
+    prep = milk_prepared
+    s, t = neighbour_edges(12)[0]
+    src = prep.views[s].reduced
+    order = np.argsort(src.xyz[:, 0] + src.xyz[:, 1])
+    rgb = src.rgb.copy()
+    rgb[order] = np.roll(rgb[order], len(order) // 6, axis=0)
+    job = PairJob(0, s, t, Cloud(src.xyz, rgb, src.normals), prep.views[t].reduced, prep.center, prep.axis,
+                  PairConfig())
+    T_true = _true_edge(milk_scan, prep, s, t)
+    xyz = prep.views[s].cloud.xyz
+    T_free, _ = fast_local(job.source, job.target, T_true, job.config)
+    T_guarded, _ = fast_local(job.source, job.target, T_true, job.config, scorer=_evaluation_clouds(job, job.config))
+    assert _mean_displacement_mm(T_free, T_true, xyz) > 5.0  # the runaway this guards against
+    assert _mean_displacement_mm(T_guarded, T_true, xyz) < 1.0
+    res = register_pair(job)
+    assert _mean_displacement_mm(res.T, T_true, xyz) < 1.5 and res.fitness > 0.9, res.to_json()["detail"]
+
+
 @pytest.mark.slow
 def test_paper_pair_recovers_the_true_neighbour_transform(milk_scan, milk_prepared):
     """The paper's path (global 4PCS, colour ICP + overlap removal + GICP at 8/4.5/1 mm, final colour ICP and
