@@ -122,9 +122,10 @@ def distributed_map(session: zenoh.Session, stats: dict, own_instance: str | Non
         workers = LiveWorkers(session)
         try:
             time.sleep(0.2)  # liveliness history arrives asynchronously
-            pending: queue.Queue[PairJob] = queue.Queue()
-            for job in jobs:
-                pending.put(job)
+            # results by position in ``jobs``: one call may hold several configurations' jobs of the same edge
+            pending: queue.Queue[tuple[int, PairJob]] = queue.Queue()
+            for item in enumerate(jobs):
+                pending.put(item)
             results: dict[int, PairResult] = {}
             errors: list[BaseException] = []
             lock = threading.Lock()
@@ -132,13 +133,13 @@ def distributed_map(session: zenoh.Session, stats: dict, own_instance: str | Non
             def worker_loop(instance: str) -> None:
                 while not errors:
                     try:
-                        job = pending.get_nowait()
+                        pos, job = pending.get_nowait()
                     except queue.Empty:
                         return
                     try:
                         res = _run_on_worker(session, workers, instance, job)
                     except WorkerLost:
-                        pending.put(job)
+                        pending.put((pos, job))
                         with lock:
                             stats["retried"] = stats.get("retried", 0) + 1
                         event(log, "worker lost; job re-queued", logging.WARNING, worker=instance, job=job.index)
@@ -147,7 +148,7 @@ def distributed_map(session: zenoh.Session, stats: dict, own_instance: str | Non
                         errors.append(exc)
                         return
                     with lock:
-                        results[job.index] = res
+                        results[pos] = res
                         stats.setdefault("by_worker", {}).setdefault(instance, 0)
                         stats["by_worker"][instance] += 1
 
@@ -155,8 +156,8 @@ def distributed_map(session: zenoh.Session, stats: dict, own_instance: str | Non
                 live = sorted(workers.snapshot(), key=lambda w: (w == own_instance, w))
                 if not live:  # nobody left: do the rest here
                     while not pending.empty():
-                        job = pending.get_nowait()
-                        results[job.index] = register_pair(job)
+                        pos, job = pending.get_nowait()
+                        results[pos] = register_pair(job)
                     break
                 threads = [threading.Thread(target=worker_loop, args=(w,), daemon=True) for w in live]
                 for t in threads:
@@ -165,7 +166,7 @@ def distributed_map(session: zenoh.Session, stats: dict, own_instance: str | Non
                     t.join()
             if errors:
                 raise errors[0]
-            return [results[job.index] for job in jobs]
+            return [results[pos] for pos in range(len(jobs))]
         finally:
             workers.close()
 
