@@ -189,7 +189,8 @@ def views_from_request(msg: DynamicRequest) -> list[DynamicView]:
 
 def dynamic_config(d: dict) -> DynamicConfig:
     """A DynamicConfig from a request's map: ``configuration``, ``paper`` (bool), ``model_voxel``, ``pair``,
-    ``preprocess`` (e.g. ``{"palette_views": 2}``, as the incremental model sets it)."""
+    ``accept`` (``AcceptCriteria`` fields), ``preprocess`` (e.g. ``{"palette_views": 2}``, as the incremental
+    model sets it)."""
     if d.get("paper"):
         cfg = DynamicConfig.paper(d.get("configuration", "no_region"))
     else:
@@ -198,6 +199,11 @@ def dynamic_config(d: dict) -> DynamicConfig:
         cfg = replace(cfg, model_voxel=float(d["model_voxel"]))
     if isinstance(d.get("pair"), dict):
         cfg = replace(cfg, pair=replace(cfg.pair, **d["pair"]))
+    if isinstance(d.get("accept"), dict):  # when the staged choice may stop (tests force the fallback path)
+        try:
+            cfg = replace(cfg, accept=replace(cfg.accept, **d["accept"]))
+        except TypeError as exc:
+            raise InvalidRequest(f"bad accept criteria: {exc}", detail={"accept": d["accept"]}) from exc
     if isinstance(d.get("preprocess"), dict):
         try:
             cfg = replace(cfg, preprocess=replace(cfg.preprocess, **d["preprocess"]))

@@ -179,10 +179,10 @@ def configuration_names(config: DynamicConfig) -> list[str]:
                                    detail={"configurations": ["auto", *CONFIGURATIONS]})
 
 
-def early_pair_jobs(views: dict[int, DynamicView], source: int,
-                    config: DynamicConfig) -> list[tuple[str, PairJob]]:
+def early_pair_jobs(views: dict[int, DynamicView], source: int, config: DynamicConfig,
+                    names: list[str] | None = None) -> list[tuple[str, PairJob]]:
     """The jobs ``build_model`` may run for edge ``source`` -> ``source - 1``, from the views so far: one per
-    configuration it may run, as (name, job) in ``configuration_names`` order (the first one first).
+    configuration it may run (or per name of ``names``), as (name, job) in ``configuration_names`` order.
 
     For the incremental model: while later views are still being captured, these jobs are already final when
     the palette comes from the first views only (``preprocess.palette_views``). A region configuration's job
@@ -197,7 +197,9 @@ def early_pair_jobs(views: dict[int, DynamicView], source: int,
     needed = {0, source - 1, source, *range(pre.palette_views)}
     if not needed <= set(views):
         return []
-    names = configuration_names(config)
+    names = [n for n in configuration_names(config) if names is None or n in names]
+    if not names:
+        return []
     center, axis = stacking_frame(views[0])
     palette = scan_palette([views[k] for k in range(pre.palette_views)], pre)
     for k in (source - 1, source):
