@@ -6,9 +6,13 @@
    when a configuration needs them),
 2. for each configuration to try: make the 12 pair jobs and hand them to ``map_pairs`` (default:
    sequential in this process; the registration service passes one that spreads them over its
-   workers), combine (pose graph by default, or the paper's drop-and-chain), measure consistency,
+   workers), combine (pose graph by default, or the paper's drop-and-chain), measure consistency; the
+   first configuration alone, then (when the staged choice does not stop there) the others together
+   (``run_configurations``: their pairs in shared rounds, so workers run them in parallel),
 3. choose the configuration (fixed, or automatic), fuse the views at ``model_voxel`` in the ``base``
    coordinates of view 0.
+
+Pair results computed earlier (the incremental model, ``early_pair_jobs``) are reused by fingerprint.
 """
 
 from __future__ import annotations
