@@ -46,6 +46,7 @@ class ServiceContext(Protocol):
 
     session: zenoh.Session
     instance: str
+    pair_slots: int
 
     async def run_cpu(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any: ...
 
@@ -112,8 +113,10 @@ def _run_on_worker(session: zenoh.Session, workers: LiveWorkers, instance: str, 
     raise RemoteError(getattr(msg, "message", "pair job failed"), code=code)
 
 
-def distributed_map(session: zenoh.Session, stats: dict, own_instance: str | None = None):  # noqa: ANN201 - MapPairs
-    """A ``map_pairs`` for ``build_model`` that spreads jobs over the live workers.
+def distributed_map(session: zenoh.Session, stats: dict, own_instance: str | None = None,  # noqa: ANN201 - MapPairs
+                    slots: int = 1):
+    """A ``map_pairs`` for ``build_model`` that spreads jobs over the live workers, ``slots`` jobs at a time
+    to each (a worker runs that many in its processes, ``pair_pool.py``).
 
     ``own_instance`` (the coordinating instance) is offered jobs last: it is also answering the request, so a
     lone job goes to another worker when there is one."""
@@ -159,7 +162,8 @@ def distributed_map(session: zenoh.Session, stats: dict, own_instance: str | Non
                         pos, job = pending.get_nowait()
                         results[pos] = register_pair(job)
                     break
-                threads = [threading.Thread(target=worker_loop, args=(w,), daemon=True) for w in live]
+                threads = [threading.Thread(target=worker_loop, args=(w,), daemon=True)
+                           for w in live for _ in range(max(1, slots))]
                 for t in threads:
                     t.start()
                 for t in threads:
@@ -231,7 +235,7 @@ async def build_model_distributed(service: ServiceContext, msg: Message | None) 
     config = dynamic_config(msg.config)
     reuse = reuse_records(msg.config.get("reuse_pairs", []))
     stats: dict = {}
-    map_pairs = distributed_map(service.session, stats, service.instance)
+    map_pairs = distributed_map(service.session, stats, service.instance, service.pair_slots)
     result = await service.run_cpu(build_model, views, config, map_pairs, reuse=reuse)
     cloud = PointCloud(xyz=np.asarray(result.xyz, np.float32), rgb=np.asarray(result.rgb, np.uint8),
                        normals=np.asarray(result.normals, np.float32))
