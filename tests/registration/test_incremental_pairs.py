@@ -189,3 +189,35 @@ def test_reused_results_travel_exactly_and_malformed_ones_are_refused():
     assert dynamic_config({"preprocess": {"palette_views": 2}}).preprocess.palette_views == 2
     with pytest.raises(InvalidRequest):
         dynamic_config({"preprocess": {"no_such_knob": 1}})
+
+
+class PerConfiguration(Recorder):
+    """Stand-in results that differ per configuration (a small yaw of 1 + 2*regions + crop degrees), so each
+    configuration's loop closure starts from its own chain."""
+
+    def __call__(self, jobs):
+        out = super().__call__(jobs)
+        for j, r in zip(jobs, out, strict=True):
+            a = np.radians(1.0 + 2.0 * j.config.regions + j.config.crop)
+            r.T = np.array([[np.cos(a), -np.sin(a), 0, 0], [np.sin(a), np.cos(a), 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+        return out
+
+
+def test_configurations_run_together_are_the_configurations_run_one_by_one(views):
+    """``run_configurations`` shares its pair rounds between configurations (results matched by position):
+    the jobs, each loop closure's prior and the outcomes are those of running each configuration alone."""
+    from services.registration.dynamic.model import run_configuration, run_configurations
+    from services.registration.dynamic.preprocess import preprocess
+
+    names = ["no_region_crop", "region", "region_crop"]
+    prep = preprocess(views, AUTO.preprocess)
+    together = PerConfiguration()
+    joint = run_configurations(prep, names, AUTO, together)
+    alone = PerConfiguration()
+    single = [run_configuration(prep, name, AUTO, alone) for name in names]
+    assert len(together.seen) == len(alone.seen) == 36 and sorted(together.seen) == sorted(alone.seen)
+    for a, b in zip(joint, single, strict=True):
+        assert a.name == b.name and a.score == b.score and a.loop == b.loop
+        assert [r.source_view for r in a.results] == [r.source_view for r in b.results]
+        assert all(np.array_equal(x.T, y.T) for x, y in zip(a.results, b.results, strict=True))
+    assert len({round(o.loop["rotation_deg"], 6) for o in joint}) == 3  # three different chains, kept apart
