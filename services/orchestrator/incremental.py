@@ -179,7 +179,7 @@ class IncrementalModel:
         try:
             built = await asyncio.to_thread(self._jobs, source, turns_deg, self.names[:1])
             for name, job, fingerprint in built:
-                await self._send(source, name, job, fingerprint)
+                await self._send(source, name, job, fingerprint, background=False)
         except asyncio.CancelledError:
             raise
         except Exception as exc:  # noqa: BLE001 - left to the end: the model is still built, the cause logged
@@ -220,15 +220,16 @@ class IncrementalModel:
                 for name, job, fingerprint in built:
                     if not await self._quiet(want_queue=False):
                         return
-                    await self._send(source, name, job, fingerprint)
+                    await self._send(source, name, job, fingerprint, background=True)
             except asyncio.CancelledError:
                 raise
             except Exception as exc:  # noqa: BLE001 - the dynamic stage computes it if it needs it
                 self.decide("speculative pair job failed; the dynamic stage will compute it if needed",
                             source=source, error=str(exc)[:200])
 
-    async def _send(self, source: int, name: str, job: Any, fingerprint: str) -> None:
-        """One job to the registration workers, its result stored; a job stored already is not sent again."""
+    async def _send(self, source: int, name: str, job: Any, fingerprint: str, *, background: bool) -> None:
+        """One job to the registration workers, its result stored; a job stored already is not sent again.
+        ``background``: speculative, run at the workers' lowest CPU priority."""
         from services.registration.pair_wire import pair_job_message, pair_record, pair_result_from_message
 
         path = self._path(source, fingerprint)
@@ -236,7 +237,7 @@ class IncrementalModel:
             return
         self.sent += 1
         self.sent_by_configuration[name] = self.sent_by_configuration.get(name, 0) + 1
-        reply = await self.cell.register_pair(pair_job_message(job))
+        reply = await self.cell.register_pair(pair_job_message(job, background))
         result = pair_result_from_message(reply)
         self.store.save_json(f"{PAIRS_DIR}/{path.name}", pair_record(fingerprint, result))
         self.decide("pair registered during the acquisition", edge=job.index, source=source, configuration=name,

@@ -85,7 +85,8 @@ class LiveWorkers:
         self._sub.undeclare()
 
 
-def _run_on_worker(session: zenoh.Session, workers: LiveWorkers, instance: str, job: PairJob) -> PairResult:
+def _run_on_worker(session: zenoh.Session, workers: LiveWorkers, instance: str, job: PairJob,
+                   background: bool = False) -> PairResult:
     """Send one job to one worker and wait, giving up as soon as the worker vanishes."""
     done = threading.Event()
     replies: list[tuple[bool, bytes]] = []
@@ -94,7 +95,7 @@ def _run_on_worker(session: zenoh.Session, workers: LiveWorkers, instance: str, 
         replies.append((reply.ok is not None, (reply.ok or reply.err).payload.to_bytes()))
 
     session.get(keys.registration_worker_pair(instance), zenoh.handlers.Callback(on_reply, done.set),
-                payload=pair_job_message(job).encode(), timeout=PAIR_TIMEOUT_S)
+                payload=pair_job_message(job, background).encode(), timeout=PAIR_TIMEOUT_S)
     while not done.wait(0.25):
         if instance not in workers.snapshot():
             raise WorkerLost(instance)
@@ -114,12 +115,13 @@ def _run_on_worker(session: zenoh.Session, workers: LiveWorkers, instance: str, 
 
 
 def distributed_map(session: zenoh.Session, stats: dict, own_instance: str | None = None,  # noqa: ANN201 - MapPairs
-                    slots: int = 1):
+                    slots: int = 1, background: bool = False):
     """A ``map_pairs`` for ``build_model`` that spreads jobs over the live workers, ``slots`` jobs at a time
     to each (a worker runs that many in its processes, ``pair_pool.py``).
 
     ``own_instance`` (the coordinating instance) is offered jobs last: it is also answering the request, so a
-    lone job goes to another worker when there is one."""
+    lone job goes to another worker when there is one. ``background``: the jobs run at the workers' lowest
+    CPU priority (speculative work)."""
 
     def map_pairs(jobs: list[PairJob]) -> list[PairResult]:
         workers = LiveWorkers(session)
@@ -140,7 +142,7 @@ def distributed_map(session: zenoh.Session, stats: dict, own_instance: str | Non
                     except queue.Empty:
                         return
                     try:
-                        res = _run_on_worker(session, workers, instance, job)
+                        res = _run_on_worker(session, workers, instance, job, background)
                     except WorkerLost:
                         pending.put((pos, job))
                         with lock:
@@ -223,7 +225,7 @@ async def register_pair_distributed(service: ServiceContext, msg: Message | None
     """
     job = pair_job_from_message(msg)
     stats: dict = {}
-    run = distributed_map(service.session, stats, service.instance)
+    run = distributed_map(service.session, stats, service.instance, background=bool(getattr(msg, "background", False)))
     (result,) = await asyncio.to_thread(run, [job])
     return pair_result_message(result)
 

@@ -6,7 +6,9 @@ milk ``realistic`` region_crop pairs: 4.5 s serial, 4.5 s in two threads). In pr
 which is what the dynamic stage's shared rounds (``model.run_configurations``: the other configurations'
 last edges and loop closures when the first is rejected) need to be faster than one by one; and an
 incremental-model pair job no longer takes turns at the GIL with a static registration in the service's
-threads.
+threads. Background jobs (``PairJobMessage.background``: the incremental model's speculative jobs) go to a
+second pool of one process at niceness 19: on the twin the simulator's physics and rendering are CPU work
+too, and a speculative job must not slow the acquisition it runs beside.
 
 The processes are spawned (not forked: Open3D's thread pools do not survive a fork) and run one Open3D
 thread each (``limit_open3d_threads``, the service's own ``OMP_NUM_THREADS``), so a job gives the same result
@@ -30,8 +32,10 @@ from common.log import event
 log = logging.getLogger("objscan.registration")
 
 
-def _init_worker(threads: str) -> None:
+def _init_worker(threads: str, nice: int) -> None:
     os.environ["OMP_NUM_THREADS"] = threads
+    if nice:
+        os.nice(nice)
     from common.open3d_threads import limit_open3d_threads
     from services.registration.dynamic import pair  # noqa: F401 - imported once, before the first job
 
@@ -43,17 +47,19 @@ def _warm() -> None:
 
 
 class PairPool:
-    """``processes`` spawned workers running ``register_pair``; ``run`` awaits one job's result."""
+    """``processes`` spawned workers running ``register_pair``; ``run`` awaits one job's result. ``nice``: the
+    workers' CPU niceness (19 for background work: it yields every core to the acquisition's processes)."""
 
-    def __init__(self, processes: int):
+    def __init__(self, processes: int, nice: int = 0):
         self.processes = max(1, int(processes))
+        self.nice = int(nice)
         self._pool = self._start()
 
     def _start(self) -> ProcessPoolExecutor:
         from common.open3d_threads import open3d_thread_count
 
         pool = ProcessPoolExecutor(max_workers=self.processes, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_init_worker, initargs=(str(open3d_thread_count()),))
+                                   initializer=_init_worker, initargs=(str(open3d_thread_count()), self.nice))
         for _ in range(self.processes):
             pool.submit(_warm)
         return pool
@@ -68,6 +74,10 @@ class PairPool:
             self._pool.shutdown(wait=False, cancel_futures=True)
             self._pool = self._start()
             raise ObjscanError("a pair worker process died", code="unavailable") from None
+
+    async def niceness(self) -> int:
+        """The workers' niceness as they see it (tests)."""
+        return await asyncio.wrap_future(self._pool.submit(os.nice, 0))
 
     def close(self) -> None:
         self._pool.shutdown(wait=False, cancel_futures=True)

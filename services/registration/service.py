@@ -48,6 +48,7 @@ class RegistrationService(Service):
         # pair jobs run in processes (pair_pool.py): several at once per instance, none sharing the static
         # stage's GIL; distributed_map sends each live worker this many at a time
         self.pair_pool = PairPool(self.settings.cpu_workers)
+        self.background_pool = PairPool(1, nice=19)
         self.pair_slots = self.pair_pool.processes
         self.queryable(keys.REGISTRATION_STATIC, self.static)
         self.queryable(keys.registration_worker_pair(self.instance), self.pair)
@@ -66,7 +67,8 @@ class RegistrationService(Service):
         job = pair_job_from_message(msg)
         self.pairs_running += 1  # in health: which worker is computing a pair right now
         try:
-            result = await self.pair_pool.run(job)
+            pool = self.background_pool if getattr(msg, "background", False) else self.pair_pool
+            result = await pool.run(job)
         finally:
             self.pairs_running -= 1
         self.jobs_done["pair"] += 1
@@ -90,6 +92,7 @@ class RegistrationService(Service):
 
     async def teardown(self) -> None:
         self.pair_pool.close()
+        self.background_pool.close()
 
     def health_info(self) -> dict[str, object]:
         return {**self.jobs_done, "coordinating": self.coordinating, "pairs_running": self.pairs_running}

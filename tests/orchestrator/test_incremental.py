@@ -44,6 +44,7 @@ class PairCell:
         self.gate = gate
         self.delay = delay
         self.jobs: list[tuple[int, int]] = []
+        self.background: list[bool] = []
         self.started = asyncio.Event()
         self.dynamic_config: dict | None = None
 
@@ -53,6 +54,7 @@ class PairCell:
 
         job = pair_job_from_message(msg)
         self.jobs.append((job.source_view, job.target_view))
+        self.background.append(msg.background)
         self.started.set()
         if self.gate is not None:
             await self.gate.wait()
@@ -188,6 +190,7 @@ def test_speculative_jobs_of_the_other_configurations_wait_for_the_foreground(tm
 
     cell, records = asyncio.run(go())
     assert cell.jobs == [(1, 0)] * 4 and len({r["fingerprint"] for r in records}) == 4
+    assert cell.background == [False, True, True, True]  # speculative jobs run at the lowest CPU priority
 
 
 def test_every_configuration_computed_during_the_acquisition_is_reused_at_the_end(tmp_path, service_group,
