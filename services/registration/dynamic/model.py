@@ -225,11 +225,13 @@ def early_pair_jobs(views: dict[int, DynamicView], source: int, config: DynamicC
 def early_pair_job(views: dict[int, DynamicView], source: int, config: DynamicConfig,
                    configuration: str | None = None) -> PairJob | None:
     """One of ``early_pair_jobs``: the named configuration's (default: the first one ``build_model`` runs);
-    None when it cannot be known yet."""
-    jobs = dict(early_pair_jobs(views, source, config))
-    if not jobs:
-        return None
-    return jobs[configuration or configuration_names(config)[0]]
+    None when it cannot be known yet, or when ``build_model`` would not run that configuration."""
+    name = configuration or configuration_names(config)[0]
+    if name not in CONFIGURATIONS:
+        raise DynamicRegistrationError(f"unknown configuration {name!r}", code="bad_value",
+                                       detail={"configurations": sorted(CONFIGURATIONS)})
+    jobs = early_pair_jobs(views, source, config, [name])
+    return jobs[0][1] if jobs else None
 
 
 def reusing(map_pairs: MapPairs, reuse: dict[str, PairResult], stats: dict) -> MapPairs:
