@@ -11,8 +11,9 @@ several objects one after the other: the figures then sit under ``objects`` (one
 ``$OBJSCAN_BENCH_SESSIONS`` (comma-separated finished session folders, e.g. of ``objscan scan``) nothing
 is scanned: those sessions are scored from their ``report.json`` and ``journal.json``.
 
-One object (the default): scanned twice in the same run, with the incremental model (pair registrations
-while the arm turns, the default) and without it (every pair at the end, the old path) as the baseline. The
+One object (the default): scanned twice in the same run, with the incremental model (pair registrations of
+every configuration the automatic choice may run, while the arm turns, the default) and without it (every
+pair at the end, the old path) as the baseline. The
 headline figure is ``model_ready_s_after_last_view``: from the last view's last scan saved to the model saved
 (target <= 5 s). The machine may be shared: each acquisition records the load average before and after
 and the CPU seconds of the services it started (``cpu_s``), beside the wall times.

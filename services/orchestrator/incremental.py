@@ -1,17 +1,25 @@
 """The incremental model: pair registrations run during the acquisition, not all at its end.
 
-As soon as view k's static result is saved, the pair job "view k onto view k-1" is built and sent to the
-registration workers (``registration/pair``) as a background task: the arm turns the object to view k+1
-meanwhile, and the state machine never waits on it. At the end, the orchestrator's ``registration/dynamic``
-request carries the finished results (``reuse_pairs``) and the dynamic stage runs only what is left (the
-last neighbour pair, the loop closure, the combination, the fusion).
+As soon as view k's static result is saved, the pair job "view k onto view k-1" of the first configuration
+the dynamic stage runs is built and sent to the registration workers (``registration/pair``) as a background
+task: the arm turns the object to view k+1 meanwhile, and the state machine never waits on it. The same
+edge's jobs of every other configuration the automatic choice may run (``no_region_crop``, ``region``,
+``region_crop``) follow as **speculative** jobs: one at a time, in configuration order, and only while no
+foreground work is in flight (a static registration, a first-configuration job), so they use the time the
+arm spends grasping, turning and scanning and never delay the acquisition or the first configuration. At
+the end, the orchestrator's ``registration/dynamic`` request carries the finished results (``reuse_pairs``)
+and the dynamic stage runs only what is left: the last neighbour pair and the loop closure of each
+configuration it runs, the combination, the fusion. Speculative jobs not started when the last view is in
+are dropped (the dynamic stage computes them only if the first configuration is rejected); the one in
+flight is awaited.
 
 Why the result is the same as computing every pair at the end: a job depends only on its two views, view
-0 (the stacking frame) and the color palette, which the incremental model fits on the first two views
-(``preprocess.palette_views = 2``, sent with the final request too). Every result is stored with the
-fingerprint of the job it answers (``pair.job_fingerprint``); the dynamic stage reuses a result only for
-the identical job, so a re-scanned view, another configuration or a changed setting is recomputed, never
-mixed in.
+0 (the stacking frame), the color palette, which the incremental model fits on the first two views
+(``preprocess.palette_views = 2``, sent with the final request too), and, for a region configuration, the
+regions of its two views (each segmented on its own, fixed seed) and their GOOD pairing
+(``model.early_pair_jobs``). Every result is stored with the fingerprint of the job it answers
+(``pair.job_fingerprint``); the dynamic stage reuses a result only for the identical job, so a re-scanned
+view, another configuration or a changed setting is recomputed, never mixed in.
 
 Persistence: each result is written atomically to ``pairs/edge_KK_<fingerprint>.json`` in the session
 folder as soon as it arrives; a resumed orchestrator finds it there and does not send the job again. A
@@ -23,8 +31,10 @@ stage then computes that pair at the end, as without the incremental model.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
-from collections.abc import Callable
+from collections import deque
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
 
@@ -59,11 +69,27 @@ class IncrementalModel:
         self.decide = decide or (lambda what, **kw: event(log, what, **kw))
         self._tasks: dict[tuple[int, int], asyncio.Task[None]] = {}  # (source view, generation) -> task
         self._generation: dict[int, int] = {}
+        self._names: list[str] | None = None  # the configurations the dynamic stage may run, first one first
+        self._speculative: deque[tuple[int, int, list[float]]] = deque()  # (source, generation, turns)
+        self._speculating: asyncio.Task[None] | None = None
+        self._foreground = 0  # static registrations and first-configuration jobs in flight
+        self._closing = False
+        self._turn: asyncio.Condition | None = None
         self.sent = 0
+        self.sent_by_configuration: dict[str, int] = {}
 
     @property
     def folder(self) -> Path:
         return self.store.path / PAIRS_DIR
+
+    @property
+    def names(self) -> list[str]:
+        if self._names is None:
+            from services.registration.dynamic.model import configuration_names
+            from services.registration.dynamic_face import dynamic_config
+
+            self._names = configuration_names(dynamic_config(self.config))
+        return self._names
 
     # ------------------------------------------------------------------------------------------ scheduling
     def view_ready(self, k: int, turns_deg: list[float]) -> None:
@@ -83,14 +109,34 @@ class IncrementalModel:
                 continue
             key = (source, self._generation.setdefault(source, 0))
             if key not in self._tasks:
-                self._tasks[key] = asyncio.ensure_future(self._edge(source, list(turns_deg)))
+                self._tasks[key] = asyncio.ensure_future(self._edge(source, key[1], list(turns_deg)))
+
+    @contextlib.asynccontextmanager
+    async def foreground(self) -> AsyncIterator[None]:
+        """Work the acquisition waits on (the machine wraps its static registrations in it): no speculative job
+        starts meanwhile, so none takes a registration worker's thread or a core from it."""
+        self._foreground += 1
+        try:
+            yield
+        finally:
+            self._foreground -= 1
+            await self._notify()
 
     async def finished(self) -> list[dict]:
-        """Wait for the jobs in flight (a failed one is only logged) and return every stored result record."""
+        """Wait for the first configuration's jobs in flight (a failed one is only logged) and the speculative
+        job in flight, drop the speculative jobs not started, and return every stored result record."""
         if not self.enabled:
             return []
+        self._closing = True
+        await self._notify()
         if self._tasks:
             await asyncio.gather(*self._tasks.values(), return_exceptions=True)
+        if self._speculating is not None:
+            await asyncio.gather(self._speculating, return_exceptions=True)
+        dropped = len(self._speculative)
+        self._speculative.clear()
+        if dropped:
+            self.decide("speculative pair jobs left to the dynamic stage", edges=dropped)
         return await asyncio.to_thread(self.records)
 
     def records(self) -> list[dict]:
@@ -104,44 +150,95 @@ class IncrementalModel:
 
     def close(self) -> None:
         """Cancel jobs in flight (the run stopped or failed); stored results stay for a resume."""
+        self._closing = True
         for t in self._tasks.values():
             t.cancel()
+        if self._speculating is not None:
+            self._speculating.cancel()
 
     # ------------------------------------------------------------------------------------------ one edge
     def _path(self, source: int, fingerprint: str) -> Path:
         return self.folder / f"edge_{source - 1:02d}_{fingerprint[:16]}.json"
 
-    def _job(self, source: int, turns_deg: list[float]):  # noqa: ANN202 - (PairJob, fingerprint) | None
-        """Build the job exactly as the dynamic stage will (same conversion, same config): CPU, in a thread."""
-        from services.registration.dynamic.model import early_pair_job
+    def _jobs(self, source: int, turns_deg: list[float], names: list[str]) -> list[tuple[str, Any, str]]:
+        """Build the jobs exactly as the dynamic stage will (same conversion, same config): CPU, in a thread.
+        [(configuration, PairJob, fingerprint)], empty when they cannot be known yet."""
+        from services.registration.dynamic.model import early_pair_jobs
         from services.registration.dynamic.pair import job_fingerprint
         from services.registration.dynamic_face import dynamic_config, dynamic_view
 
         cfg = dynamic_config(self.config)
         needed = sorted({0, *range(cfg.preprocess.palette_views), source - 1, source})
         views = {i: dynamic_view(self.store.load_view(i), turns_deg[i], i) for i in needed}
-        job = early_pair_job(views, source, cfg)
-        return None if job is None else (job, job_fingerprint(job))
+        return [(name, job, job_fingerprint(job)) for name, job in early_pair_jobs(views, source, cfg, names)]
 
-    async def _edge(self, source: int, turns_deg: list[float]) -> None:
-        from services.registration.pair_wire import pair_job_message, pair_record, pair_result_from_message
-
+    async def _edge(self, source: int, generation: int, turns_deg: list[float]) -> None:
+        """The first configuration's job of edge ``source``, in the foreground; then the edge's other
+        configurations go to the speculative queue."""
+        self._foreground += 1
         try:
-            built = await asyncio.to_thread(self._job, source, turns_deg)
-            if built is None:
-                return
-            job, fingerprint = built
-            path = self._path(source, fingerprint)
-            if path.is_file():  # finished before a restart: never sent twice
-                return
-            self.sent += 1
-            reply = await self.cell.register_pair(pair_job_message(job))
-            result = pair_result_from_message(reply)
-            self.store.save_json(f"{PAIRS_DIR}/{path.name}", pair_record(fingerprint, result))
-            self.decide("pair registered during the acquisition", edge=job.index, source=source,
-                        fitness=round(result.fitness, 3), seconds=round(result.seconds, 2))
+            built = await asyncio.to_thread(self._jobs, source, turns_deg, self.names[:1])
+            for name, job, fingerprint in built:
+                await self._send(source, name, job, fingerprint, background=False)
         except asyncio.CancelledError:
             raise
         except Exception as exc:  # noqa: BLE001 - left to the end: the model is still built, the cause logged
             self.decide("pair job during the acquisition failed; the dynamic stage will compute it",
                         source=source, error=str(exc)[:200])
+        finally:
+            self._foreground -= 1
+        if len(self.names) > 1 and not self._closing:
+            self._speculative.append((source, generation, turns_deg))
+            if self._speculating is None or self._speculating.done():
+                self._speculating = asyncio.ensure_future(self._speculate())
+        await self._notify()
+
+    async def _notify(self) -> None:
+        if self._turn is None:
+            self._turn = asyncio.Condition()
+        async with self._turn:
+            self._turn.notify_all()
+
+    async def _quiet(self, want_queue: bool) -> bool:
+        """Wait until no foreground work is in flight (and, with ``want_queue``, a speculative edge waits);
+        False once the acquisition's end has come."""
+        if self._turn is None:
+            self._turn = asyncio.Condition()
+        async with self._turn:
+            await self._turn.wait_for(lambda: self._closing or (
+                self._foreground == 0 and (bool(self._speculative) or not want_queue)))
+        return not self._closing
+
+    async def _speculate(self) -> None:
+        """The speculative queue: edge after edge, configuration after configuration, one job at a time."""
+        while self._speculative and await self._quiet(want_queue=True):
+            source, generation, turns_deg = self._speculative.popleft()
+            if generation != self._generation.get(source):
+                continue  # the view was re-scanned since: its new edge is queued anew
+            try:
+                built = await asyncio.to_thread(self._jobs, source, turns_deg, self.names[1:])
+                for name, job, fingerprint in built:
+                    if not await self._quiet(want_queue=False):
+                        return
+                    await self._send(source, name, job, fingerprint, background=True)
+            except asyncio.CancelledError:
+                raise
+            except Exception as exc:  # noqa: BLE001 - the dynamic stage computes it if it needs it
+                self.decide("speculative pair job failed; the dynamic stage will compute it if needed",
+                            source=source, error=str(exc)[:200])
+
+    async def _send(self, source: int, name: str, job: Any, fingerprint: str, *, background: bool) -> None:
+        """One job to the registration workers, its result stored; a job stored already is not sent again.
+        ``background``: speculative, run at the workers' lowest CPU priority."""
+        from services.registration.pair_wire import pair_job_message, pair_record, pair_result_from_message
+
+        path = self._path(source, fingerprint)
+        if path.is_file():  # finished before a restart: never sent twice
+            return
+        self.sent += 1
+        self.sent_by_configuration[name] = self.sent_by_configuration.get(name, 0) + 1
+        reply = await self.cell.register_pair(pair_job_message(job, background))
+        result = pair_result_from_message(reply)
+        self.store.save_json(f"{PAIRS_DIR}/{path.name}", pair_record(fingerprint, result))
+        self.decide("pair registered during the acquisition", edge=job.index, source=source, configuration=name,
+                    fitness=round(result.fitness, 3), seconds=round(result.seconds, 2))

@@ -356,7 +356,8 @@ class Acquisition:
         if not self.store.has_view(k):
             frames = [self.store.load_scan(k, j) for j in range(SCANS_PER_VIEW)]
             try:
-                result = await self.cell.register_static(frames, view=k, profile=self.config.static_profile)
+                async with self.incremental.foreground():  # no speculative pair job meanwhile
+                    result = await self.cell.register_static(frames, view=k, profile=self.config.static_profile)
             except RemoteError as exc:
                 self.decide("static registration failed", code=exc.code, message=exc.message)
                 return await self._rescan(k, f"registration failed: {exc.code}")

@@ -46,6 +46,7 @@ class ServiceContext(Protocol):
 
     session: zenoh.Session
     instance: str
+    pair_slots: int
 
     async def run_cpu(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any: ...
 
@@ -84,7 +85,8 @@ class LiveWorkers:
         self._sub.undeclare()
 
 
-def _run_on_worker(session: zenoh.Session, workers: LiveWorkers, instance: str, job: PairJob) -> PairResult:
+def _run_on_worker(session: zenoh.Session, workers: LiveWorkers, instance: str, job: PairJob,
+                   background: bool = False) -> PairResult:
     """Send one job to one worker and wait, giving up as soon as the worker vanishes."""
     done = threading.Event()
     replies: list[tuple[bool, bytes]] = []
@@ -93,7 +95,7 @@ def _run_on_worker(session: zenoh.Session, workers: LiveWorkers, instance: str, 
         replies.append((reply.ok is not None, (reply.ok or reply.err).payload.to_bytes()))
 
     session.get(keys.registration_worker_pair(instance), zenoh.handlers.Callback(on_reply, done.set),
-                payload=pair_job_message(job).encode(), timeout=PAIR_TIMEOUT_S)
+                payload=pair_job_message(job, background).encode(), timeout=PAIR_TIMEOUT_S)
     while not done.wait(0.25):
         if instance not in workers.snapshot():
             raise WorkerLost(instance)
@@ -112,19 +114,23 @@ def _run_on_worker(session: zenoh.Session, workers: LiveWorkers, instance: str, 
     raise RemoteError(getattr(msg, "message", "pair job failed"), code=code)
 
 
-def distributed_map(session: zenoh.Session, stats: dict, own_instance: str | None = None):  # noqa: ANN201 - MapPairs
-    """A ``map_pairs`` for ``build_model`` that spreads jobs over the live workers.
+def distributed_map(session: zenoh.Session, stats: dict, own_instance: str | None = None,  # noqa: ANN201 - MapPairs
+                    slots: int = 1, background: bool = False):
+    """A ``map_pairs`` for ``build_model`` that spreads jobs over the live workers, ``slots`` jobs at a time
+    to each (a worker runs that many in its processes, ``pair_pool.py``).
 
     ``own_instance`` (the coordinating instance) is offered jobs last: it is also answering the request, so a
-    lone job goes to another worker when there is one."""
+    lone job goes to another worker when there is one. ``background``: the jobs run at the workers' lowest
+    CPU priority (speculative work)."""
 
     def map_pairs(jobs: list[PairJob]) -> list[PairResult]:
         workers = LiveWorkers(session)
         try:
             time.sleep(0.2)  # liveliness history arrives asynchronously
-            pending: queue.Queue[PairJob] = queue.Queue()
-            for job in jobs:
-                pending.put(job)
+            # results by position in ``jobs``: one call may hold several configurations' jobs of the same edge
+            pending: queue.Queue[tuple[int, PairJob]] = queue.Queue()
+            for item in enumerate(jobs):
+                pending.put(item)
             results: dict[int, PairResult] = {}
             errors: list[BaseException] = []
             lock = threading.Lock()
@@ -132,13 +138,13 @@ def distributed_map(session: zenoh.Session, stats: dict, own_instance: str | Non
             def worker_loop(instance: str) -> None:
                 while not errors:
                     try:
-                        job = pending.get_nowait()
+                        pos, job = pending.get_nowait()
                     except queue.Empty:
                         return
                     try:
-                        res = _run_on_worker(session, workers, instance, job)
+                        res = _run_on_worker(session, workers, instance, job, background)
                     except WorkerLost:
-                        pending.put(job)
+                        pending.put((pos, job))
                         with lock:
                             stats["retried"] = stats.get("retried", 0) + 1
                         event(log, "worker lost; job re-queued", logging.WARNING, worker=instance, job=job.index)
@@ -147,7 +153,7 @@ def distributed_map(session: zenoh.Session, stats: dict, own_instance: str | Non
                         errors.append(exc)
                         return
                     with lock:
-                        results[job.index] = res
+                        results[pos] = res
                         stats.setdefault("by_worker", {}).setdefault(instance, 0)
                         stats["by_worker"][instance] += 1
 
@@ -155,17 +161,18 @@ def distributed_map(session: zenoh.Session, stats: dict, own_instance: str | Non
                 live = sorted(workers.snapshot(), key=lambda w: (w == own_instance, w))
                 if not live:  # nobody left: do the rest here
                     while not pending.empty():
-                        job = pending.get_nowait()
-                        results[job.index] = register_pair(job)
+                        pos, job = pending.get_nowait()
+                        results[pos] = register_pair(job)
                     break
-                threads = [threading.Thread(target=worker_loop, args=(w,), daemon=True) for w in live]
+                threads = [threading.Thread(target=worker_loop, args=(w,), daemon=True)
+                           for w in live for _ in range(max(1, slots))]
                 for t in threads:
                     t.start()
                 for t in threads:
                     t.join()
             if errors:
                 raise errors[0]
-            return [results[job.index] for job in jobs]
+            return [results[pos] for pos in range(len(jobs))]
         finally:
             workers.close()
 
@@ -188,7 +195,8 @@ def views_from_request(msg: DynamicRequest) -> list[DynamicView]:
 
 def dynamic_config(d: dict) -> DynamicConfig:
     """A DynamicConfig from a request's map: ``configuration``, ``paper`` (bool), ``model_voxel``, ``pair``,
-    ``preprocess`` (e.g. ``{"palette_views": 2}``, as the incremental model sets it)."""
+    ``accept`` (``AcceptCriteria`` fields), ``preprocess`` (e.g. ``{"palette_views": 2}``, as the incremental
+    model sets it)."""
     if d.get("paper"):
         cfg = DynamicConfig.paper(d.get("configuration", "no_region"))
     else:
@@ -197,6 +205,11 @@ def dynamic_config(d: dict) -> DynamicConfig:
         cfg = replace(cfg, model_voxel=float(d["model_voxel"]))
     if isinstance(d.get("pair"), dict):
         cfg = replace(cfg, pair=replace(cfg.pair, **d["pair"]))
+    if isinstance(d.get("accept"), dict):  # when the staged choice may stop (tests force the fallback path)
+        try:
+            cfg = replace(cfg, accept=replace(cfg.accept, **d["accept"]))
+        except TypeError as exc:
+            raise InvalidRequest(f"bad accept criteria: {exc}", detail={"accept": d["accept"]}) from exc
     if isinstance(d.get("preprocess"), dict):
         try:
             cfg = replace(cfg, preprocess=replace(cfg.preprocess, **d["preprocess"]))
@@ -212,7 +225,7 @@ async def register_pair_distributed(service: ServiceContext, msg: Message | None
     """
     job = pair_job_from_message(msg)
     stats: dict = {}
-    run = distributed_map(service.session, stats, service.instance)
+    run = distributed_map(service.session, stats, service.instance, background=bool(getattr(msg, "background", False)))
     (result,) = await asyncio.to_thread(run, [job])
     return pair_result_message(result)
 
@@ -224,7 +237,7 @@ async def build_model_distributed(service: ServiceContext, msg: Message | None) 
     config = dynamic_config(msg.config)
     reuse = reuse_records(msg.config.get("reuse_pairs", []))
     stats: dict = {}
-    map_pairs = distributed_map(service.session, stats, service.instance)
+    map_pairs = distributed_map(service.session, stats, service.instance, service.pair_slots)
     result = await service.run_cpu(build_model, views, config, map_pairs, reuse=reuse)
     cloud = PointCloud(xyz=np.asarray(result.xyz, np.float32), rgb=np.asarray(result.rgb, np.uint8),
                        normals=np.asarray(result.normals, np.float32))

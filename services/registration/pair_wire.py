@@ -35,6 +35,9 @@ class PairJobMessage(Message):
     source_regions: list[PointCloud] = field(default_factory=list)
     target_regions: list[PointCloud] = field(default_factory=list)
     region_pairs: list[list[int]] = field(default_factory=list)
+    # speculative work (the incremental model's other configurations): run at the lowest CPU priority, so it
+    # only takes cores nothing else wants (pair_pool.py)
+    background: bool = False
 
 
 @dataclass(kw_only=True)
@@ -103,8 +106,9 @@ def _config(d: dict) -> PairConfig:
     return _rebuild(PairConfig, d, "pair config")
 
 
-def pair_job_message(job: PairJob) -> PairJobMessage:
-    return PairJobMessage(index=job.index, source_view=job.source_view, target_view=job.target_view,
+def pair_job_message(job: PairJob, background: bool = False) -> PairJobMessage:
+    return PairJobMessage(background=background, index=job.index, source_view=job.source_view,
+                          target_view=job.target_view,
                           source=_cloud_msg(job.source), target=_cloud_msg(job.target),
                           center=np.asarray(job.center, np.float64), axis=np.asarray(job.axis, np.float64),
                           prior=np.asarray(job.prior, np.float64), config=_config_dict(job.config),

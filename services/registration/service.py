@@ -20,10 +20,10 @@ from common.api import StaticRequest, ViewResult
 from common.codec import Message
 from common.errors import InvalidRequest
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
-from services.registration.dynamic.pair import register_pair
 from services.registration.dynamic_face import build_model_distributed, register_pair_distributed
 
 # registers PairJobMessage/PairResultMessage with the codec: a pair job is decoded before its handler runs
+from services.registration.pair_pool import PairPool
 from services.registration.pair_wire import pair_job_from_message, pair_result_message
 from services.registration.static.config import StaticConfig
 from services.registration.static.pipeline import register_view
@@ -45,6 +45,11 @@ class RegistrationService(Service):
         self.jobs_done = {"static": 0, "pair": 0, "dynamic": 0}
         self.coordinating = 0
         self.pairs_running = 0
+        # pair jobs run in processes (pair_pool.py): several at once per instance, none sharing the static
+        # stage's GIL; distributed_map sends each live worker this many at a time
+        self.pair_pool = PairPool(self.settings.cpu_workers)
+        self.background_pool = PairPool(1, nice=19)
+        self.pair_slots = self.pair_pool.processes
         self.queryable(keys.REGISTRATION_STATIC, self.static)
         self.queryable(keys.registration_worker_pair(self.instance), self.pair)
         self.queryable(keys.REGISTRATION_DYNAMIC, self.dynamic)
@@ -62,7 +67,8 @@ class RegistrationService(Service):
         job = pair_job_from_message(msg)
         self.pairs_running += 1  # in health: which worker is computing a pair right now
         try:
-            result = await self.run_cpu(register_pair, job)
+            pool = self.background_pool if getattr(msg, "background", False) else self.pair_pool
+            result = await pool.run(job)
         finally:
             self.pairs_running -= 1
         self.jobs_done["pair"] += 1
@@ -83,6 +89,10 @@ class RegistrationService(Service):
             self.coordinating -= 1
         self.jobs_done["dynamic"] += 1
         return result
+
+    async def teardown(self) -> None:
+        self.pair_pool.close()
+        self.background_pool.close()
 
     def health_info(self) -> dict[str, object]:
         return {**self.jobs_done, "coordinating": self.coordinating, "pairs_running": self.pairs_running}

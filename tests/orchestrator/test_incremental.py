@@ -44,6 +44,7 @@ class PairCell:
         self.gate = gate
         self.delay = delay
         self.jobs: list[tuple[int, int]] = []
+        self.background: list[bool] = []
         self.started = asyncio.Event()
         self.dynamic_config: dict | None = None
 
@@ -53,6 +54,7 @@ class PairCell:
 
         job = pair_job_from_message(msg)
         self.jobs.append((job.source_view, job.target_view))
+        self.background.append(msg.background)
         self.started.set()
         if self.gate is not None:
             await self.gate.wait()
@@ -166,3 +168,63 @@ def test_with_the_incremental_model_off_nothing_is_sent_and_nothing_reused(tmp_p
 
 async def _nothing() -> None:
     return None
+
+
+def test_speculative_jobs_of_the_other_configurations_wait_for_the_foreground(tmp_path, view_results):
+    """The first configuration's job goes out at once; the other configurations' jobs of the same edge only
+    when no static registration is in flight, one at a time, in configuration order."""
+    async def go():
+        store = _store_with(tmp_path, view_results, 3)
+        cell = PairCell(delay=0.05)
+        inc = IncrementalModel(store, {}, cell)
+        async with inc.foreground():  # a static registration in flight
+            inc.view_ready(1, view_results[1])
+            await asyncio.wait_for(cell.started.wait(), 20)
+            await asyncio.sleep(1.0)
+            assert inc.sent_by_configuration == {"no_region": 1}  # nothing speculative meanwhile
+        while inc.sent < 4:
+            await asyncio.sleep(0.05)
+        assert list(inc.sent_by_configuration) == ["no_region", "no_region_crop", "region", "region_crop"]
+        records = await inc.finished()
+        return cell, records
+
+    cell, records = asyncio.run(go())
+    assert cell.jobs == [(1, 0)] * 4 and len({r["fingerprint"] for r in records}) == 4
+    assert cell.background == [False, True, True, True]  # speculative jobs run at the lowest CPU priority
+
+
+def test_every_configuration_computed_during_the_acquisition_is_reused_at_the_end(tmp_path, service_group,
+                                                                                   view_results):
+    """Over Zenoh, a real registration worker: the incremental model sends every configuration's neighbour
+    jobs as the views arrive; the end (first configuration forced to be rejected, so all four run) computes
+    only the four loop closures and reuses the other twelve pairs. ~14 s (a real process, 16 pairs at 3 mm)."""
+    from common.client import request as zenoh_request
+    from common.launcher import ProcessSpec
+    from services.orchestrator.cell import Cell
+
+    service_group.launch([ProcessSpec("services.registration", [], service="registration")], timeout=180)
+
+    async def go():
+        session = service_group.session
+        cell = Cell(lambda key, msg=None, timeout=60.0: zenoh_request(session, key, msg, timeout=timeout), "robot0")
+        store = SessionStore(tmp_path / "session")
+        inc = IncrementalModel(store, {"accept": {"min_posed_fitness": 1.01}}, cell)
+        views, turns = view_results
+        for k, v in enumerate(views):  # the views arrive one by one, as the acquisition registers them
+            async with inc.foreground():
+                store.save_view(v)
+            inc.view_ready(k, turns)
+        deadline = asyncio.get_running_loop().time() + 300
+        while inc.sent < 4 * (VIEWS - 1):
+            assert asyncio.get_running_loop().time() < deadline, inc.sent_by_configuration
+            await asyncio.sleep(0.2)
+        records = await inc.finished()
+        result = await cell.build_model(views, turns, {**inc.config, "reuse_pairs": records})
+        return inc, records, result.figures
+
+    inc, records, figures = asyncio.run(go())
+    assert inc.sent_by_configuration == {name: VIEWS - 1 for name in
+                                         ("no_region", "no_region_crop", "region", "region_crop")}
+    assert len(records) == 4 * (VIEWS - 1)
+    assert set(figures["candidates"]) == {"no_region", "no_region_crop", "region", "region_crop"}
+    assert figures["timings"]["pairs"] == {"reused": 4 * (VIEWS - 1), "computed": 4}

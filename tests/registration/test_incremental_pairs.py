@@ -10,7 +10,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from services.registration.dynamic.model import DynamicConfig, build_model, early_pair_job
+from services.registration.dynamic.configurations import CONFIGURATIONS
+from services.registration.dynamic.model import DynamicConfig, build_model, early_pair_job, early_pair_jobs
 from services.registration.dynamic.pair import PairResult, job_fingerprint, register_pair
 from services.registration.dynamic.preprocess import PreprocessConfig
 from services.registration.dynamic.views import DynamicRegistrationError
@@ -92,6 +93,65 @@ def test_incremental_pairs_give_the_same_model_as_computing_them_at_the_end(view
     assert len(incremental) == len(at_end) and np.allclose(incremental.xyz, at_end.xyz, atol=1e-7)
 
 
+AUTO = replace(CONFIG, configuration="auto")
+
+
+def _all_configurations_as_captured(views, config=AUTO):
+    """Every configuration's neighbour jobs as the acquisition builds them: fingerprint -> (configuration, job)."""
+    early = {}
+    for k in range(1, len(views)):
+        built = early_pair_jobs(dict(enumerate(views[:k + 1])), k, config)
+        assert [name for name, _ in built] == list(CONFIGURATIONS)  # the first configuration's job first
+        for name, job in built:
+            assert (job.source_view, job.target_view) == (k, k - 1)
+            assert job.config.regions == CONFIGURATIONS[name][0] and job.config.crop == CONFIGURATIONS[name][1]
+            early[job_fingerprint(job)] = (name, job)
+    return early
+
+
+class RejectFirst(Recorder):
+    """Stand-in results, except the first configuration's loop closure: 20 degrees off, so it is rejected."""
+
+    def __call__(self, jobs):
+        out = super().__call__(jobs)
+        for j, r in zip(jobs, out, strict=True):
+            if j.source_view == 0 and not j.config.regions and not j.config.crop:
+                r.T = np.array([[np.cos(0.35), -np.sin(0.35), 0, 0], [np.sin(0.35), np.cos(0.35), 0, 0],
+                                [0, 0, 1, 0], [0, 0, 0, 1.0]])
+        return out
+
+
+def test_every_configurations_early_jobs_are_its_jobs_at_the_end(views):
+    """Region configurations included: each view is segmented on its own and each edge's regions paired by
+    GOOD from its two views only, so the job built at view k has the fingerprint ``build_model`` builds at the
+    end, configuration by configuration."""
+    early = _all_configurations_as_captured(views)
+    assert len(early) == 4 * 11  # four different jobs per edge
+    region_jobs = [job for name, job in early.values() if CONFIGURATIONS[name][0]]
+    assert all(job.region_pairs and job.source_regions and job.target_regions for job in region_jobs)
+    at_end = RejectFirst()
+    model = build_model(views, AUTO, map_pairs=at_end)  # staged: the first is rejected, so all four run
+    assert set(model.candidates) == set(CONFIGURATIONS)
+    assert len(at_end.seen) == 48
+    ends = [fp for fp in at_end.seen if fp not in early]
+    assert len(ends) == 4  # per configuration only the loop closure was not known early
+    for name in CONFIGURATIONS:  # ... and every neighbour job of every configuration was
+        assert sum(1 for fp in at_end.seen if fp in early and early[fp][0] == name) == 11
+    reused = RejectFirst()
+    again = build_model(views, AUTO, map_pairs=reused, reuse={fp: _quick_result(job) for fp, (_, job) in early.items()})
+    assert again.timings["pairs"] == {"reused": 44, "computed": 4} and sorted(reused.seen) == sorted(ends)
+    assert again.configuration == model.configuration != "no_region"
+
+
+def test_the_early_jobs_of_one_configuration_alone_and_of_all_agree(views):
+    seen = dict(enumerate(views[:4]))
+    every = dict(early_pair_jobs(seen, 3, AUTO))
+    for name in CONFIGURATIONS:
+        alone = early_pair_job(seen, 3, replace(CONFIG, configuration=name))
+        assert job_fingerprint(alone) == job_fingerprint(every[name])
+    assert early_pair_jobs(seen, 3, DynamicConfig()) == []  # palette from all views: not known before the end
+
+
 def test_a_changed_view_or_config_is_recomputed_not_reused(views):
     reuse = _as_captured(views, run=_quick_result)
     moved = list(views)
@@ -106,7 +166,6 @@ def test_a_changed_view_or_config_is_recomputed_not_reused(views):
 def test_no_early_job_when_it_could_still_change(views):
     seen = dict(enumerate(views[:4]))
     assert early_pair_job(seen, 3, DynamicConfig()) is None  # palette from all views: view 11 would change it
-    assert early_pair_job(seen, 3, replace(CONFIG, configuration="region")) is None  # regions: left to the end
     assert early_pair_job({0: views[0], 2: views[2], 3: views[3]}, 3, CONFIG) is None  # palette view 1 missing
     with pytest.raises(DynamicRegistrationError):
         PreprocessConfig(palette_views=-1)
@@ -130,3 +189,35 @@ def test_reused_results_travel_exactly_and_malformed_ones_are_refused():
     assert dynamic_config({"preprocess": {"palette_views": 2}}).preprocess.palette_views == 2
     with pytest.raises(InvalidRequest):
         dynamic_config({"preprocess": {"no_such_knob": 1}})
+
+
+class PerConfiguration(Recorder):
+    """Stand-in results that differ per configuration (a small yaw of 1 + 2*regions + crop degrees), so each
+    configuration's loop closure starts from its own chain."""
+
+    def __call__(self, jobs):
+        out = super().__call__(jobs)
+        for j, r in zip(jobs, out, strict=True):
+            a = np.radians(1.0 + 2.0 * j.config.regions + j.config.crop)
+            r.T = np.array([[np.cos(a), -np.sin(a), 0, 0], [np.sin(a), np.cos(a), 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+        return out
+
+
+def test_configurations_run_together_are_the_configurations_run_one_by_one(views):
+    """``run_configurations`` shares its pair rounds between configurations (results matched by position):
+    the jobs, each loop closure's prior and the outcomes are those of running each configuration alone."""
+    from services.registration.dynamic.model import run_configuration, run_configurations
+    from services.registration.dynamic.preprocess import preprocess
+
+    names = ["no_region_crop", "region", "region_crop"]
+    prep = preprocess(views, AUTO.preprocess)
+    together = PerConfiguration()
+    joint = run_configurations(prep, names, AUTO, together)
+    alone = PerConfiguration()
+    single = [run_configuration(prep, name, AUTO, alone) for name in names]
+    assert len(together.seen) == len(alone.seen) == 36 and sorted(together.seen) == sorted(alone.seen)
+    for a, b in zip(joint, single, strict=True):
+        assert a.name == b.name and a.score == b.score and a.loop == b.loop
+        assert [r.source_view for r in a.results] == [r.source_view for r in b.results]
+        assert all(np.array_equal(x.T, y.T) for x, y in zip(a.results, b.results, strict=True))
+    assert len({round(o.loop["rotation_deg"], 6) for o in joint}) == 3  # three different chains, kept apart

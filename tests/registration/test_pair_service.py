@@ -37,6 +37,27 @@ def test_a_pair_job_sent_to_registration_pair_comes_back_as_computed_here(servic
     there, here = pair_result_from_message(reply), register_pair(job)
     assert (there.source_view, there.target_view, there.index) == (2, 1, 1)
     assert np.allclose(there.T, here.T, atol=1e-9) and abs(there.fitness - here.fitness) < 1e-9
+    # a speculative job runs in the background pool (niceness 19, pair_pool.py): the same result
+    reply = request_sync(service_group.session, keys.REGISTRATION_PAIR, pair_job_message(job, background=True),
+                         timeout=300)
+    assert np.array_equal(pair_result_from_message(reply).T, there.T)
+
+
+def test_background_pair_workers_run_at_the_lowest_cpu_priority():
+    import asyncio
+
+    from services.registration.pair_pool import PairPool
+
+    async def go():
+        pools = PairPool(1), PairPool(1, nice=19)
+        try:
+            return [await p.niceness() for p in pools]
+        finally:
+            for p in pools:
+                p.close()
+
+    normal, background = asyncio.run(go())
+    assert background == min(19, normal + 19) and background > normal
 
 
 @pytest.mark.slow

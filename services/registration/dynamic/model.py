@@ -6,9 +6,13 @@
    when a configuration needs them),
 2. for each configuration to try: make the 12 pair jobs and hand them to ``map_pairs`` (default:
    sequential in this process; the registration service passes one that spreads them over its
-   workers), combine (pose graph by default, or the paper's drop-and-chain), measure consistency,
+   workers), combine (pose graph by default, or the paper's drop-and-chain), measure consistency; the
+   first configuration alone, then (when the staged choice does not stop there) the others together
+   (``run_configurations``: their pairs in shared rounds, so workers run them in parallel),
 3. choose the configuration (fixed, or automatic), fuse the views at ``model_voxel`` in the ``base``
    coordinates of view 0.
+
+Pair results computed earlier (the incremental model, ``early_pair_jobs``) are reused by fingerprint.
 """
 
 from __future__ import annotations
@@ -43,11 +47,13 @@ from services.registration.dynamic.preprocess import (
     PreparedView,
     PreprocessConfig,
     attach_regions,
+    edge_region_pairs,
     neighbour_edges,
     prepare_view,
     preprocess,
     scan_palette,
     stacking_frame,
+    view_regions,
 )
 from services.registration.dynamic.view_graph import optimise_pose_graph
 from services.registration.dynamic.views import DynamicRegistrationError, DynamicView
@@ -177,42 +183,69 @@ def configuration_names(config: DynamicConfig) -> list[str]:
                                    detail={"configurations": ["auto", *CONFIGURATIONS]})
 
 
-def early_pair_job(views: dict[int, DynamicView], source: int, config: DynamicConfig) -> PairJob | None:
-    """The job ``build_model`` will run first for edge ``source`` -> ``source - 1``, from the views so far.
+def early_pair_jobs(views: dict[int, DynamicView], source: int, config: DynamicConfig,
+                    names: list[str] | None = None) -> list[tuple[str, PairJob]]:
+    """The jobs ``build_model`` may run for edge ``source`` -> ``source - 1``, from the views so far: one per
+    configuration it may run (or per name of ``names``), as (name, job) in ``configuration_names`` order.
 
-    For the incremental model: while later views are still being captured, this job is already final when
-    the palette comes from the first views only (``preprocess.palette_views``) and the first configuration
-    needs no regions (regions are paired by GOOD across neighbours, fine, but not worth it for the
-    fallback configurations). ``views`` must hold view 0, the palette's views, ``source`` and
-    ``source - 1``. None when the job cannot be known yet (the caller then leaves it to the end).
+    For the incremental model: while later views are still being captured, these jobs are already final when
+    the palette comes from the first views only (``preprocess.palette_views``). A region configuration's job
+    is final too: ``view_regions`` segments each view on its own (fixed seed) and ``edge_region_pairs`` pairs
+    the edge's two views by GOOD, so the regions and region pairs here are those ``attach_regions`` finds at
+    the end, and the job has the same fingerprint. ``views`` must hold view 0, the palette's views,
+    ``source`` and ``source - 1``; empty when the jobs cannot be known yet (the caller leaves them to the end).
     """
     pre = config.preprocess
     if source < 1 or pre.palette_views < 1 or source < pre.palette_views - 1:
-        return None
-    name = configuration_names(config)[0]
-    regions, crop = CONFIGURATIONS[name]
-    if regions:
-        return None
+        return []
     needed = {0, source - 1, source, *range(pre.palette_views)}
     if not needed <= set(views):
-        return None
+        return []
+    names = [n for n in configuration_names(config) if names is None or n in names]
+    if not names:
+        return []
     center, axis = stacking_frame(views[0])
     palette = scan_palette([views[k] for k in range(pre.palette_views)], pre)
     for k in (source - 1, source):
         views[k].validate()
     vs, vt = (prepare_view(views[k], center, axis, palette, pre) for k in (source, source - 1))
-    return pair_job(source - 1, vs, vt, center, axis, replace(config.pair, regions=regions, crop=crop))
+    jobs = []
+    for name in names:
+        regions, crop = CONFIGURATIONS[name]
+        region_pairs = None
+        if regions:
+            if not vs.regions and not vt.regions:  # once per edge, shared by the region configurations
+                vs.regions, vt.regions = view_regions(vs, pre), view_regions(vt, pre)
+            region_pairs = edge_region_pairs(vs, vt, pre)
+        jobs.append((name, pair_job(source - 1, vs, vt, center, axis, replace(config.pair, regions=regions, crop=crop),
+                                    region_pairs)))
+    return jobs
+
+
+def early_pair_job(views: dict[int, DynamicView], source: int, config: DynamicConfig,
+                   configuration: str | None = None) -> PairJob | None:
+    """One of ``early_pair_jobs``: the named configuration's (default: the first one ``build_model`` runs);
+    None when it cannot be known yet, or when ``build_model`` would not run that configuration."""
+    name = configuration or configuration_names(config)[0]
+    if name not in CONFIGURATIONS:
+        raise DynamicRegistrationError(f"unknown configuration {name!r}", code="bad_value",
+                                       detail={"configurations": sorted(CONFIGURATIONS)})
+    jobs = early_pair_jobs(views, source, config, [name])
+    return jobs[0][1] if jobs else None
 
 
 def reusing(map_pairs: MapPairs, reuse: dict[str, PairResult], stats: dict) -> MapPairs:
-    """A ``map_pairs`` that answers a job from ``reuse`` (fingerprint -> result) when it holds that exact job."""
+    """A ``map_pairs`` that answers a job from ``reuse`` (fingerprint -> result) when it holds that exact job.
+
+    Results are matched to jobs by position: one call may carry several configurations' jobs of the same edge
+    index (``run_configurations``)."""
     def run(jobs: list[PairJob]) -> list[PairResult]:
-        known = {j.index: reuse.get(job_fingerprint(j)) if reuse else None for j in jobs}
-        todo = [j for j in jobs if known[j.index] is None]
-        fresh = {r.index: r for r in (map_pairs(todo) if todo else [])}
+        known = [reuse.get(job_fingerprint(j)) if reuse else None for j in jobs]
+        todo = [j for j, k in zip(jobs, known, strict=True) if k is None]
+        fresh = iter(map_pairs(todo) if todo else [])
         stats["reused"] = stats.get("reused", 0) + len(jobs) - len(todo)
         stats["computed"] = stats.get("computed", 0) + len(todo)
-        return [known[j.index] or fresh[j.index] for j in jobs]
+        return [k if k is not None else next(fresh) for k in known]
 
     return run
 
@@ -227,27 +260,63 @@ def chain_to_first(results: list[PairResult]) -> np.ndarray:
 
 def run_configuration(prep: Prepared, name: str, config: DynamicConfig, map_pairs: MapPairs) -> ConfigurationOutcome:
     """Pairs + combination + consistency for one named configuration."""
-    if name not in CONFIGURATIONS:
-        raise DynamicRegistrationError(f"unknown configuration {name!r}", code="bad_value",
-                                       detail={"configurations": sorted(CONFIGURATIONS)})
+    return run_configurations(prep, [name], config, map_pairs)[0]
+
+
+def run_configurations(prep: Prepared, names: list[str], config: DynamicConfig,
+                       map_pairs: MapPairs) -> list[ConfigurationOutcome]:
+    """Pairs + combination + consistency for several configurations at once, in two rounds of ``map_pairs``:
+    every configuration's neighbour pairs in one call, then every loop closure in one call.
+
+    Why together: after the first configuration is rejected the automatic choice runs all the others anyway, and
+    what is left of each (its last neighbour edge, its loop closure, when the incremental model computed the
+    rest during the acquisition) is a few independent jobs; one call lets the workers run them in parallel
+    instead of one configuration after another. The outcomes are those of running the configurations one by
+    one: each job is a function of itself alone (its fingerprint), whatever worker runs it and in whatever
+    order. ``seconds`` of each outcome counts the shared pair rounds plus its own combination.
+    """
+    for name in names:
+        if name not in CONFIGURATIONS:
+            raise DynamicRegistrationError(f"unknown configuration {name!r}", code="bad_value",
+                                           detail={"configurations": sorted(CONFIGURATIONS)})
     t0 = time.perf_counter()
-    regions, crop = CONFIGURATIONS[name]
-    if regions:
+    if any(CONFIGURATIONS[name][0] for name in names):
         attach_regions(prep, config.preprocess)
-    pair_cfg = replace(config.pair, regions=regions, crop=crop)
-    jobs = make_pair_jobs(prep, pair_cfg)
+    jobs = {name: make_pair_jobs(prep, replace(config.pair, regions=CONFIGURATIONS[name][0],
+                                               crop=CONFIGURATIONS[name][1])) for name in names}
     # Neighbour pairs first; the loop-closure pair (view 0 onto view n-1) then starts from the chain of their
     # measured transforms, not from the commanded turns: a systematic turn error (the robot-turned profile's
     # gain: 26-44 degrees achieved per commanded 30) accumulates to tens of degrees by the last view, beyond
     # what the local search recovers, while each neighbour pair is off by only a few degrees.
-    sequential, loop_job = jobs[:-1], jobs[-1]
-    results = sorted(map_pairs(sequential), key=lambda r: r.index)
-    loop_job.prior = np.linalg.inv(chain_to_first(results)) if results else loop_job.prior
-    results += map_pairs([loop_job])
-    if len(results) != len(jobs):
+    neighbours = [j for name in names for j in jobs[name][:-1]]
+    flat = map_pairs(neighbours)
+    if len(flat) != len(neighbours):
         raise DynamicRegistrationError("map_pairs returned the wrong number of results", code="bad_workers",
-                                       detail={"jobs": len(jobs), "results": len(results)})
+                                       detail={"jobs": len(neighbours), "results": len(flat)})
+    results: dict[str, list[PairResult]] = {}
+    for i, name in enumerate(names):
+        n = len(jobs[name]) - 1
+        results[name] = sorted(flat[i * n:(i + 1) * n], key=lambda r: r.index)
+        loop_job = jobs[name][-1]
+        loop_job.prior = np.linalg.inv(chain_to_first(results[name])) if results[name] else loop_job.prior
+    loops = map_pairs([jobs[name][-1] for name in names])
+    if len(loops) != len(names):
+        raise DynamicRegistrationError("map_pairs returned the wrong number of results", code="bad_workers",
+                                       detail={"jobs": len(names), "results": len(loops)})
     t_pairs = time.perf_counter() - t0
+    outcomes = []
+    for name, loop in zip(names, loops, strict=True):
+        t1 = time.perf_counter()
+        outcome = _finish_configuration(prep, name, config, results[name] + [loop])
+        outcome.seconds = t_pairs + time.perf_counter() - t1
+        outcome.extra = {"pairs_seconds": t_pairs}
+        outcomes.append(outcome)
+    return outcomes
+
+
+def _finish_configuration(prep: Prepared, name: str, config: DynamicConfig,
+                          results: list[PairResult]) -> ConfigurationOutcome:
+    """Combination, loop closure and consistency of one configuration's pair results."""
     if config.combine.method == "pose_graph":
         combined = optimise_pose_graph(prep, results, config.combine)
     elif config.combine.method == "paper":
@@ -256,8 +325,7 @@ def run_configuration(prep: Prepared, name: str, config: DynamicConfig, map_pair
         raise DynamicRegistrationError(f"unknown combine method {config.combine.method!r}", code="bad_value")
     loop = loop_closure_error(results, prep.center)
     consistency = pairwise_consistency(prep, combined.poses, results, config.combine)
-    out = ConfigurationOutcome(name, results, combined, loop, consistency, time.perf_counter() - t0,
-                               extra={"pairs_seconds": t_pairs})
+    out = ConfigurationOutcome(name, results, combined, loop, consistency, 0.0)
     out.score = consistency_score(loop, consistency)
     return out
 
@@ -293,13 +361,13 @@ def build_model(views: list[DynamicView], config: DynamicConfig | None = None,
     say("preprocessed", {"views": len(views), "seconds": prep.seconds})
     names = configuration_names(cfg)
     staged = cfg.configuration == "auto" and cfg.auto_strategy == "staged"
-    outcomes: list[ConfigurationOutcome] = []
-    for name in names:
-        outcome = run_configuration(prep, name, cfg, run)
-        outcomes.append(outcome)
-        say("configuration", {"name": name, **outcome.summary()})
-        if staged and len(outcomes) == 1 and choose(outcomes, cfg.accept, True)[1].startswith("first"):
-            break
+    outcomes = run_configurations(prep, names[:1], cfg, run)
+    say("configuration", {"name": names[0], **outcomes[0].summary()})
+    if len(names) > 1 and not (staged and choose(outcomes, cfg.accept, True)[1].startswith("first")):
+        # the first is rejected (or every configuration is wanted): the rest all run, together
+        for outcome in run_configurations(prep, names[1:], cfg, run):
+            outcomes.append(outcome)
+            say("configuration", {"name": outcome.name, **outcome.summary()})
     if len(outcomes) == 1 and cfg.configuration != "auto":
         chosen, reason = outcomes[0], f"fixed by configuration ({cfg.configuration})"
     else:

@@ -196,31 +196,43 @@ def preprocess(views: list[DynamicView], config: PreprocessConfig | None = None,
     return prep
 
 
+def view_regions(pv: PreparedView, config: PreprocessConfig) -> list[Cloud]:
+    """One prepared view split into regions (on its ``region_voxel`` copy): a function of that view alone
+    (fixed seed), so the incremental model segments each view once, as it arrives, exactly as the end would."""
+    from services.registration.dynamic import good
+
+    small = pv.reduced.downsampled(config.region_voxel)
+    idx = good.segment_regions(small.xyz, small.normals, small.rgb, n_regions=config.n_regions, seed=config.seed)
+    return [small.subset(r) for r in idx]
+
+
+def edge_region_pairs(ps: PreparedView, pt: PreparedView, config: PreprocessConfig) -> list[tuple[int, int]]:
+    """The top GOOD region pairs of one edge (source ``ps`` onto target ``pt``): a function of those two views'
+    regions only, so an edge's pairs are known as soon as its two views are."""
+    from services.registration.dynamic import good
+
+    if not ps.regions or not pt.regions:
+        return []
+    allp_s = np.vstack([r.xyz for r in ps.regions])
+    allp_t = np.vstack([r.xyz for r in pt.regions])
+    off_s = np.cumsum([0] + [len(r) for r in ps.regions])
+    off_t = np.cumsum([0] + [len(r) for r in pt.regions])
+    top = good.top_region_pairs([np.arange(off_s[i], off_s[i + 1]) for i in range(len(ps.regions))],
+                                [np.arange(off_t[i], off_t[i + 1]) for i in range(len(pt.regions))],
+                                allp_s, allp_t, n_values=config.good_bins, k=config.region_pairs)
+    return [(p.index_a, p.index_b) for p in top]
+
+
 def attach_regions(prep: Prepared, config: PreprocessConfig | None = None) -> Prepared:
     """Segment every view into regions and find the top GOOD region pairs between neighbours (in place).
 
     Separate from ``preprocess`` so the automatic choice computes regions only if it needs them.
     """
-    from services.registration.dynamic import good
-
     cfg = config or PreprocessConfig()
     if prep.region_pairs:
         return prep
     for pv in prep.views:
-        small = pv.reduced.downsampled(cfg.region_voxel)
-        idx = good.segment_regions(small.xyz, small.normals, small.rgb, n_regions=cfg.n_regions, seed=cfg.seed)
-        pv.regions = [small.subset(r) for r in idx]
+        pv.regions = view_regions(pv, cfg)
     for s, t in neighbour_edges(len(prep.views)):
-        ps, pt = prep.views[s], prep.views[t]
-        if not ps.regions or not pt.regions:
-            prep.region_pairs[(s, t)] = []
-            continue
-        allp_s = np.vstack([r.xyz for r in ps.regions])
-        allp_t = np.vstack([r.xyz for r in pt.regions])
-        off_s = np.cumsum([0] + [len(r) for r in ps.regions])
-        off_t = np.cumsum([0] + [len(r) for r in pt.regions])
-        top = good.top_region_pairs([np.arange(off_s[i], off_s[i + 1]) for i in range(len(ps.regions))],
-                                    [np.arange(off_t[i], off_t[i + 1]) for i in range(len(pt.regions))],
-                                    allp_s, allp_t, n_values=cfg.good_bins, k=cfg.region_pairs)
-        prep.region_pairs[(s, t)] = [(p.index_a, p.index_b) for p in top]
+        prep.region_pairs[(s, t)] = edge_region_pairs(prep.views[s], prep.views[t], cfg)
     return prep
