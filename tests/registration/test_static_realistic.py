@@ -78,8 +78,8 @@ def test_a_pose_slid_along_the_table_passes_the_scan_check_and_is_refined_on_the
     assert object_error_mm(slid) > 6.0
     assert dp._check(data[1].check, data[0].check, slid, prior, cfg)[1]  # the whole-scan check cannot tell
     out = dp._local(data[1], data[0], slid, prior, "rgbd_odometry", cfg)
-    assert out is not None and out.method == "rgbd_odometry+object_icp"
+    assert out.verified and out.method == "rgbd_odometry+object_icp"
     assert object_error_mm(out.T) < 1.0, object_error_mm(out.T)
     assert dp.refine_on_object(data[1], data[0], true, prior, cfg) is None
     off = dp._local(data[1], data[0], slid, prior, "rgbd_odometry", StaticConfig(object_refine=False))
-    assert off is not None and off.method == "rgbd_odometry" and object_error_mm(off.T) > 6.0
+    assert off.verified and off.method == "rgbd_odometry" and object_error_mm(off.T) > 6.0

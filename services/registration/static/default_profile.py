@@ -167,11 +167,11 @@ def refine_on_object(src: PriorScan, tgt: PriorScan, T: np.ndarray, prior: np.nd
 
 
 def _local(src: PriorScan, tgt: PriorScan, T: np.ndarray, prior: np.ndarray, method: str, cfg: StaticConfig
-           ) -> PairOutcome | None:
-    """The verified local outcome of ``T`` (object-refined when that helps), or None if it fails the check."""
+           ) -> PairOutcome:
+    """The local outcome of ``T``: checked (``verified``), and object-refined when it passed and that helps."""
     res, passed = _check(src.check, tgt.check, T, prior, cfg)
     if not passed:
-        return None
+        return PairOutcome(T, "local", method, res, False)
     refined = refine_on_object(src, tgt, T, prior, cfg)
     if refined is not None:
         res_r, passed_r = _check(src.check, tgt.check, refined, prior, cfg)
@@ -184,16 +184,17 @@ def register_pair(src: PriorScan, tgt: PriorScan, prior: np.ndarray, cfg: Static
     """Local first (RGB-D odometry from the reverse seed, then GICP from the arm's prior), each refined on the
     object when that helps, global only when both fail. The check always measures the correction against the
     arm's prior."""
+    candidates = []
     ok, T = _odometry(src, tgt, reverse_seed(src, tgt, prior, cfg), cfg)
-    if ok and (out := _local(src, tgt, T, prior, "rgbd_odometry", cfg)) is not None:
+    if ok:
+        out = _local(src, tgt, T, prior, "rgbd_odometry", cfg)
+        if out.verified:
+            return out
+        candidates.append(out)
+    out = _local(src, tgt, _gicp_pyramid(src, tgt, cfg, prior), prior, "icp", cfg)
+    if out.verified:
         return out
-    candidates = [PairOutcome(T, "local", "rgbd_odometry", _check(src.check, tgt.check, T, prior, cfg)[0], False)
-                  ] if ok else []
-    T = _gicp_pyramid(src, tgt, cfg, prior)
-    if (out := _local(src, tgt, T, prior, "icp", cfg)) is not None:
-        return out
-    res, _ = _check(src.check, tgt.check, T, prior, cfg)
-    candidates.append(PairOutcome(T, "local", "icp", res, False))
+    candidates.append(out)
     return _global(src, tgt, cfg, seed, candidates)
 
 
