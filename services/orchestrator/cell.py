@@ -48,6 +48,7 @@ Tap = Callable[[str, Message | None, Message, float, float], None]
 
 MOVE_TIMEOUT_S = 120.0
 COMPUTE_TIMEOUT_S = 600.0
+ESTOP_ANSWER_S = 2.0  # how long a stop waits for the arm's answer (one attempt, no retry)
 POSE_ATTEMPTS = 3  # captures tried for a frame with a camera pose (a real camera asks the arm for it)
 
 
@@ -124,6 +125,28 @@ class Cell:
 
     async def estop(self) -> None:
         await self._request(keys.arm(self.robot, "stop"), timeout=5.0)
+
+    async def estop_once(self, timeout: float = ESTOP_ANSWER_S) -> dict[str, Any]:
+        """Send the arm one e-stop and say what came back, within ``timeout``: never the retry loop.
+
+        A stop is only worth something now: waiting for an unavailable arm to come back (the retry window
+        of every other call) would hold the caller for minutes and say nothing true. The result is the
+        arm's own answer (``answered: True`` with its ``estopped`` and whatever else it said) or why none
+        came (``answered: False`` with the error's ``code`` and ``message``), with the wait in ``ms``."""
+        key = keys.arm(self.robot, "stop")
+        t0, wall = time.monotonic(), time.time()
+        try:
+            reply = await self._send(key, None, timeout=timeout)
+        except ObjscanError as exc:
+            # an error the arm itself sent (its stop failed) is an answer; silence or a timeout is not
+            answered = isinstance(exc, RemoteError) and not exc.transient
+            return {"answered": answered, **({"estopped": False} if answered else {}), "code": exc.code,
+                    "message": exc.message, "ms": round((time.monotonic() - t0) * 1000.0, 1)}
+        ms = round((time.monotonic() - t0) * 1000.0, 1)
+        if self.tap is not None:
+            self.tap(key, None, reply, wall, time.time())
+        info = dict(reply.info) if isinstance(reply, Ok) and isinstance(reply.info, dict) else {}
+        return {**info, "answered": True, "ms": ms}
 
     async def reset_estop(self) -> None:
         await self._request(keys.arm(self.robot, "stop"), Request(params={"reset": True}), timeout=5.0)

@@ -4,7 +4,8 @@
   acquisition in the background and answers at once with its session folder;
 - ``orchestrator/status``: queryable and a stream (published at every step) of state, view, attempts,
   last error, model path and accuracy;
-- ``orchestrator/stop``: halts the arm at once and parks the acquisition in ``stopped`` (resumable).
+- ``orchestrator/stop``: parks the acquisition in ``stopped`` (resumable) at once and e-stops the arm (one
+  attempt, bounded wait); the reply says what the arm answered (``arm``: ``answered``, ``estopped``, ``ms``).
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.machine import Acquisition
 from services.orchestrator.recording_hook import recorded_acquisition
 from services.session_store import SessionStore
+
+STOP_PARK_S = 1.0  # how long a stop reply waits for the cancelled run to park (it does not block it)
 
 
 class OrchestratorService(Service):
@@ -100,14 +103,21 @@ class OrchestratorService(Service):
         return Ok(info=self.current.status() if self.current else self.last_status)
 
     async def stop_acquisition(self, msg: Message | None, ctx: QueryContext) -> Ok:
-        try:
-            await self.cell.estop()
-        finally:
-            if self.current is not None:
-                self.current.stop_requested.set()
-            if self.task is not None and not self.task.done():
-                self.task.cancel()
-        return Ok(info={"stopped": True})
+        """Stop the acquisition at once and e-stop the arm, and say what the arm answered.
+
+        The acquisition is stopped first (cancelled: it parks in ``stopped``, resumable), then the arm gets
+        one e-stop with a bounded wait (``Cell.estop_once``): an unavailable arm never holds the stop in the
+        retry loop every other call goes through. The reply carries the arm's answer (or why none came) so
+        the one who asked can report it truthfully."""
+        running = self.task is not None and not self.task.done()
+        if self.current is not None:
+            self.current.stop_requested.set()
+        if running:
+            self.task.cancel()  # type: ignore[union-attr]
+        arm = await self.cell.estop_once()
+        if running:  # the cancelled run writes its journal and publishes ``stopped``: give it a moment
+            await asyncio.wait({self.task}, timeout=STOP_PARK_S)  # type: ignore[arg-type]
+        return Ok(info={"stopped": True, "acquisition": self.last_status.get("status"), "arm": arm})
 
     def health_info(self) -> dict[str, object]:
         s = self.current.status() if self.current else self.last_status

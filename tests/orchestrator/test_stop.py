@@ -1,0 +1,56 @@
+"""The orchestrator's stop comes first: with the arm unavailable, ``orchestrator/stop`` parks the acquisition
+in ``stopped`` at once and answers with what the arm said (here: nothing), instead of holding the stop in
+the retry loop every other arm call goes through (up to two minutes, the acquisition running all along)."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+from common import keys
+from common.client import request_sync
+from common.codec import decode
+from common.launcher import ProcessSpec
+from common.messages import Ok, Request
+
+ROBOT = keys.DEFAULT_ROBOT
+
+
+def test_stop_with_an_unavailable_arm_stops_the_acquisition_at_once(service_group, tmp_path):
+    group = service_group
+    group.launch([ProcessSpec("services.orchestrator", ["--sessions", str(tmp_path)], service="orchestrator")])
+    stopped_at: list[float] = []
+    seen = threading.Event()
+
+    def on_status(sample) -> None:  # noqa: ANN001
+        msg = decode(sample.payload.to_bytes())
+        if isinstance(msg, Ok) and msg.info.get("status") == "stopped" and not stopped_at:
+            stopped_at.append(time.monotonic())
+            seen.set()
+
+    sub = group.session.declare_subscriber(keys.orchestrator(ROBOT, "status"), on_status)
+    try:
+        params = {"out": str(tmp_path / "s"), "record": False, "library": None,
+                  "config": {"object": "milk", "views": 2}}
+        request_sync(group.session, keys.orchestrator(ROBOT, "run"), Request(params=params), timeout=30)
+        deadline = time.monotonic() + 30  # no arm, no twin: the run waits for the arm (retrying)
+        while time.monotonic() < deadline:
+            s = request_sync(group.session, keys.orchestrator(ROBOT, "status"), timeout=10).info
+            if s.get("status") == "running":
+                break
+            time.sleep(0.2)
+        assert s.get("status") == "running", s
+        time.sleep(1.5)  # well inside the arm retry loop
+        t0 = time.monotonic()
+        reply = request_sync(group.session, keys.orchestrator(ROBOT, "stop"), timeout=10)
+        answered_s = time.monotonic() - t0
+        assert isinstance(reply, Ok) and reply.info["stopped"] is True
+        assert seen.wait(5.0), "the acquisition never published 'stopped'"
+        assert stopped_at[0] - t0 <= 1.0, f"acquisition stopped {stopped_at[0] - t0:.2f} s after the stop"
+        assert answered_s <= 4.0  # one bounded e-stop attempt plus the park, never the retry window
+        arm = reply.info["arm"]
+        assert arm["answered"] is False and arm["code"] in ("unavailable", "timeout"), arm
+        final = request_sync(group.session, keys.orchestrator(ROBOT, "status"), timeout=10).info
+        assert final["status"] == "stopped" and final["state"] == "stopped", final
+    finally:
+        sub.undeclare()
