@@ -37,6 +37,7 @@ from common.zenoh_config import DEFAULT_ROUTER_PORT, free_tcp_port
 from services.cell import SERVICE_MODULES, cell_specs, needs_twin
 from services.cli.cells import add_network_args, remote_session, session_name
 from services.cli.outcome import USAGE, one_line, print_json, report_error
+from services.cli.stop import StopOnInterrupt
 from services.live import add_live_args, live_requested, open_live_view
 
 console = Console()
@@ -228,18 +229,12 @@ def _acquire(session, args, target: str, *, local: bool, t0: float) -> int:  # n
     reply = request_sync(session, keys.orchestrator(args.robot, "run"), Request(params=params), timeout=30)
     mine = str(reply.info["session"])
     console.print(f"session: {mine}" + (" (resumed)" if reply.info.get("resumed") else ""))
-    stop_sent = False
-
-    def on_sigint(*_: object) -> None:
-        nonlocal stop_sent
-        if not stop_sent:
-            stop_sent = True
-            console.print("[yellow]stopping: e-stop sent to the arm[/yellow]")
-            request_sync(session, keys.orchestrator(args.robot, "stop"), timeout=10)
-
+    on_sigint = StopOnInterrupt(lambda key, timeout: request_sync(session, key, timeout=timeout), args.robot,
+                                lambda line: console.print(f"[yellow]{line}[/yellow]"))
     signal.signal(signal.SIGINT, on_sigint)
     try:
         final = _follow(updates, args.views if not args.resume else None, session=mine)
+        on_sigint.wait()  # the stop's answer (the arm's) is printed before the summary
     finally:
         sub.undeclare()
         if live is not None:
