@@ -5,7 +5,13 @@ process, sim backends) and stops what it started at the end. A cell started by `
 that run (a lock file per port, ``cell_lock_path``): a second ``objscan scan`` on the machine does not join
 it (it would share its orchestrator and status key and be stopped when the first exits, issue 17 #13) but
 starts a private cell on a free port, unless ``--port`` names the cell to join. ``--resume SESSION_DIR``
-continues a session whose orchestrator was killed, stopped or failed, re-using every frame already captured.
+continues a session whose orchestrator was killed, stopped or failed, re-using every frame already captured;
+on a session whose acquisition is still running (its CLI was killed, the private cell went on) it attaches:
+it shows the progress, and Ctrl-C stops it as in a normal scan.
+
+A cell this command starts from nothing is a private cell kept by its own process (``services/private_cell.py``):
+the acquisition goes on if the CLI dies, and the cell stops itself ``--cell-grace`` seconds after the
+acquisition ends with no client following it; ``objscan status`` lists private cells, ``objscan down`` stops one.
 The orchestrator this command starts is confined to the session's parent folder and ``--library``.
 """
 
@@ -18,10 +24,9 @@ import queue
 import signal
 import socket
 import sys
-import tempfile
 import time
 from collections.abc import Mapping
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Any
 
 from rich.console import Console
@@ -39,6 +44,7 @@ from services.cli.cells import add_network_args, remote_session, session_name
 from services.cli.outcome import USAGE, one_line, print_json, report_error
 from services.cli.stop import StopOnInterrupt
 from services.live import add_live_args, live_requested, open_live_view
+from services.private_cell import DEFAULT_GRACE_S, PrivateCell, cell_lock_path, find_cell, start_cell
 
 console = Console()
 
@@ -71,6 +77,9 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--port", type=int, default=None,
                    help=f"router port of the cell to join or start (default: {DEFAULT_ROUTER_PORT}, or a private "
                         "free port when another objscan scan owns that cell)")
+    p.add_argument("--cell-grace", type=float, default=DEFAULT_GRACE_S, metavar="SECONDS",
+                   help="a private cell this scan starts stops itself this long after its acquisition ends "
+                        "with no client following it, e.g. when this command was killed (default: %(default)s)")
     p.add_argument("--force-first-slip", action="store_true", help="sim: make the first grasp slip")
     p.add_argument("--no-incremental", action="store_true",
                    help="register every view pair at the end, not while the arm turns (the old, slower path)")
@@ -90,11 +99,6 @@ def _router_listening(port: int) -> bool:
         return s.connect_ex(("127.0.0.1", port)) == 0
 
 
-def cell_lock_path(port: int) -> Path:
-    """The lock an ``objscan scan`` holds on the cell it started on ``port``."""
-    return Path(tempfile.gettempdir()) / f"objscan-cell-{port}.lock"
-
-
 def _claim_cell(port: int) -> int | None:
     """Take the lock of the cell on ``port`` (a file descriptor), or None when another process holds it."""
     fd = os.open(cell_lock_path(port), os.O_RDWR | os.O_CREAT, 0o666)
@@ -107,11 +111,15 @@ def _claim_cell(port: int) -> int | None:
 
 
 def ensure_cell(port: int | None, backend: str | Mapping[str, str], log_dir: Path, services: list[str] | None = None,
-                extra_args: dict[str, list[str]] | None = None) -> ServiceGroup:
+                extra_args: dict[str, list[str]] | None = None, keeper_grace: float | None = None
+                ) -> ServiceGroup | PrivateCell:
     """Join the cell on ``port``; start the router and whatever of ``services`` (default: all) is missing.
 
     ``port=None``: the default port, unless the cell there was started by another ``objscan scan`` (its lock
     is held): then a private cell on a free port. A cell this call starts is locked until the group stops.
+    With ``keeper_grace`` (``objscan scan``), a cell this call starts from nothing is a private cell kept by a
+    process of its own (``services/private_cell.py``): it outlives a killed CLI and stops itself once its
+    acquisition has ended and no client follows it for ``keeper_grace`` seconds.
     """
     explicit = port is not None
     port = port if port is not None else DEFAULT_ROUTER_PORT
@@ -125,6 +133,12 @@ def ensure_cell(port: int | None, backend: str | Mapping[str, str], log_dir: Pat
     if listening and lock is not None:  # someone else's cell (objscan up, compose): join it, do not own it
         os.close(lock)
         lock = None
+    if not listening and lock is not None and keeper_grace is not None:
+        wanted = [s for s in services or list(SERVICE_MODULES) if not (s == "sim" and not needs_twin(backend))]
+        console.print(f"starting a private cell on port {port}: {', '.join(wanted)} (logs in {log_dir}); it "
+                      f"stops {keeper_grace:g} s after its acquisition ends with no client following it")
+        return start_cell(port, lock, cell_specs(wanted, backend=backend, extra_args=extra_args), log_dir,
+                          grace_s=keeper_grace)
     group = ServiceGroup(port, log_dir=log_dir, start_router=not listening)
     if lock is not None:
         group.cleanups.append(lambda: os.close(lock))
@@ -181,12 +195,19 @@ def run(args) -> int:  # noqa: ANN001
         finally:
             session.close()
     session_dir = Path(name).resolve()
+    if args.resume:  # its acquisition may still run in a private cell (a killed CLI's): follow it there
+        kept = find_cell(session_dir)
+        if kept is not None:
+            console.print(f"the private cell on port {kept['port']} works on this session: attaching")
+            with PrivateCell(int(kept["port"]), owner=False) as cell:
+                return _acquire(cell.session, args, str(session_dir), local=True, t0=t0)
     # the orchestrator started here may write only the session's parent folder and the named library
     orchestrator_args = ["--sessions", str(session_dir.parent)]
     if args.library:
         orchestrator_args += ["--library", str(Path(args.library).resolve())]
     with ensure_cell(args.port, args.backend, session_dir / "logs",
-                     extra_args={"orchestrator": orchestrator_args, **arm_args(args)}) as group:
+                     extra_args={"orchestrator": orchestrator_args, **arm_args(args)},
+                     keeper_grace=args.cell_grace) as group:
         # a joined cell's orchestrator (objscan up, compose) writes under its own --sessions root: without
         # --out, name the session and let it place it there (a local absolute path would be refused)
         joined = "orchestrator" not in group.procs
@@ -226,9 +247,15 @@ def _acquire(session, args, target: str, *, local: bool, t0: float) -> int:  # n
             params["library"] = str(Path(args.library).resolve())
     if live is not None:
         params["live"] = True  # the orchestrator publishes each exchange on its tap (services/live/tap.py)
-    reply = request_sync(session, keys.orchestrator(args.robot, "run"), Request(params=params), timeout=30)
-    mine = str(reply.info["session"])
-    console.print(f"session: {mine}" + (" (resumed)" if reply.info.get("resumed") else ""))
+    running = _running_acquisition(session, args.robot, target) if args.resume else None
+    if running is not None:  # attach: follow it (Ctrl-C stops it) instead of starting it a second time
+        mine = str(running["session"])
+        console.print(f"session: {mine} (attached to its running acquisition; Ctrl-C stops it)")
+        updates.put(running)
+    else:
+        reply = request_sync(session, keys.orchestrator(args.robot, "run"), Request(params=params), timeout=30)
+        mine = str(reply.info["session"])
+        console.print(f"session: {mine}" + (" (resumed)" if reply.info.get("resumed") else ""))
     on_sigint = StopOnInterrupt(lambda key, timeout: request_sync(session, key, timeout=timeout), args.robot,
                                 lambda line: console.print(f"[yellow]{line}[/yellow]"))
     signal.signal(signal.SIGINT, on_sigint)
@@ -243,6 +270,22 @@ def _acquire(session, args, target: str, *, local: bool, t0: float) -> int:  # n
     if args.json_output:
         return _summary_json(final, Path(mine), time.time() - t0)
     return _summary(final, Path(mine), time.time() - t0, resume_arg=mine if local else target)
+
+
+def _running_acquisition(session, robot: str, target: str) -> dict[str, Any] | None:  # noqa: ANN001
+    """The orchestrator's status when the acquisition it runs is the one at ``target``, else None."""
+    try:
+        reply = request_sync(session, keys.orchestrator(robot, "status"), timeout=10)
+    except ObjscanError:
+        return None  # no orchestrator answers: the run request says why
+    status = reply.info if isinstance(reply, Ok) and isinstance(reply.info, dict) else {}
+    if status.get("status") != "running" or not status.get("session"):
+        return None
+    theirs, want = PurePosixPath(str(status["session"])), PurePosixPath(target)
+    # a local target is the absolute folder; a remote one (--connect) is relative to the cell's sessions root
+    same = Path(theirs).resolve() == Path(want).resolve() if want.is_absolute() \
+        else theirs.parts[-len(want.parts):] == want.parts
+    return status if same else None
 
 
 def _follow(updates: queue.Queue[dict[str, Any]], views: int | None, session: str | None = None) -> dict[str, Any]:

@@ -1,7 +1,11 @@
 """``objscan status``: the live services (liveliness) and what their health queries say.
 
-``--json`` prints one object, ``{"services": [{service, instance, status, busy, uptime_s, info}, ...]}``.
-No router: exit 3 with one line (``no_router``); a router but no live service: exit 4 (``no_services``).
+``--json`` prints one object, ``{"services": [{service, instance, status, busy, uptime_s, info}, ...],
+"cells": [{port, session, pid, state, status, view, ...}, ...]}``: ``cells`` are the private cells on this
+machine (those ``objscan scan`` started for itself, ``services/private_cell.py``), whatever network the
+services come from; ``objscan down --port P`` stops one.
+No router: exit 3 with one line (``no_router``); a router but no live service: exit 4 (``no_services``); the
+private cells are listed before that line (under ``--json``, in the error's ``detail.cells``).
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from common.messages import Health
 from common.zenoh_config import open_session
 from services.cli.cells import add_network_args, network_settings
 from services.cli.outcome import print_json
+from services.private_cell import private_cells
 
 
 def register(sub) -> None:  # noqa: ANN001
@@ -53,15 +58,23 @@ def run(args) -> int:  # noqa: ANN001
     settings = network_settings(args.connect)
     if "OBJSCAN_ZENOH_CONNECT_TIMEOUT_MS" not in os.environ:
         settings = replace(settings, connect_timeout_ms=STATUS_CONNECT_TIMEOUT_MS)
-    session = open_session(settings)
+    cells = [cell_row(c) for c in private_cells()]
     try:
-        rows = collect(session, args.timeout)
-    finally:
-        session.close()
-    if not rows:
-        raise ServiceUnavailable("no live services found (is 'objscan up' running?)", code="no_services")
+        session = open_session(settings)
+        try:
+            rows = collect(session, args.timeout)
+        finally:
+            session.close()
+        if not rows:
+            raise ServiceUnavailable("no live services found (is 'objscan up' running?)", code="no_services")
+    except ObjscanError as exc:
+        if cells:  # say what runs on this machine before saying the network is not there
+            exc.detail = {**(exc.detail or {}), "cells": cells}
+            if not args.json_output:
+                print_cells(cells)
+        raise
     if args.json_output:
-        print_json({"services": rows})
+        print_json({"services": rows, "cells": cells})
         return 0
     table = Table(title="objscan services")
     for col in ("service", "instance", "status", "busy", "uptime", "info"):
@@ -72,4 +85,27 @@ def run(args) -> int:  # noqa: ANN001
         table.add_row(r["service"], r["instance"], r["status"] if ok else f"[red]{r['status']}[/red]",
                       str(r["busy"]) if ok else "-", f"{r['uptime_s']:.0f}s" if ok else "-", info[:80])
     Console().print(table)
+    if cells:
+        print_cells(cells)
     return 0
+
+
+def cell_row(rec: dict[str, Any]) -> dict[str, Any]:
+    """What ``status`` shows of a private cell's record."""
+    return {"port": rec.get("port"), "session": rec.get("session"), "pid": rec.get("pid"),
+            "state": rec.get("state"), "status": rec.get("status"), "view": rec.get("view"),
+            "followed": rec.get("followed"), "shutdown_in_s": rec.get("shutdown_in_s"),
+            "processes": rec.get("processes") or {}, "log_dir": rec.get("log_dir")}
+
+
+def print_cells(cells: list[dict[str, Any]]) -> None:
+    table = Table(title="private cells (objscan down --port P stops one)")
+    for col in ("port", "session", "pid", "state", "acquisition", "processes"):
+        table.add_column(col)
+    for c in cells:
+        state = str(c["state"]) + (f" (stops in {c['shutdown_in_s']:.0f}s)" if c.get("shutdown_in_s") is not None
+                                   else "")
+        acq = f"{c['status'] or '-'}" + (f", view {c['view']}" if c.get("view") is not None else "")
+        table.add_row(str(c["port"]), str(c["session"] or "-"), str(c["pid"]), state, acq,
+                      str(len(c["processes"])))
+    Console().print(table)

@@ -19,6 +19,7 @@ from services.cli import outcome
 COMMANDS = [
     "services.cli.cmd_up",
     "services.cli.cmd_status",
+    "services.cli.cmd_down",
     "services.cli.cmd_call",
     "services.cli.cmd_bench",
     "services.cli.cmd_scan",
