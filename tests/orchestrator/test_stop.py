@@ -4,14 +4,17 @@ the retry loop every other arm call goes through (up to two minutes, the acquisi
 
 from __future__ import annotations
 
+import asyncio
 import threading
 import time
 
 from common import keys
 from common.client import request_sync
 from common.codec import decode
+from common.errors import RemoteError, ServiceUnavailable
 from common.launcher import ProcessSpec
 from common.messages import Ok, Request
+from services.orchestrator.cell import Cell
 
 ROBOT = keys.DEFAULT_ROBOT
 
@@ -54,3 +57,30 @@ def test_stop_with_an_unavailable_arm_stops_the_acquisition_at_once(service_grou
         assert final["status"] == "stopped" and final["state"] == "stopped", final
     finally:
         sub.undeclare()
+
+
+class OneAnswer:
+    """A requester that answers (or raises) the same thing every time and counts the sends."""
+
+    def __init__(self, answer: object):
+        self.answer, self.sent = answer, 0
+
+    async def __call__(self, key: str, msg, *, timeout: float):  # noqa: ANN001, ANN204
+        self.sent += 1
+        if isinstance(self.answer, Exception):
+            raise self.answer
+        return self.answer
+
+
+def test_the_stop_e_stop_is_sent_once_and_reports_the_arm_answer_or_its_absence():
+    gone = OneAnswer(ServiceUnavailable("no service answers"))
+    t0 = time.monotonic()
+    out = asyncio.run(Cell(gone, ROBOT).estop_once(timeout=0.5))
+    assert gone.sent == 1 and time.monotonic() - t0 < 0.5  # no retry, no back-off sleep
+    assert out["answered"] is False and out["code"] == "unavailable" and "estopped" not in out
+    ok = OneAnswer(Ok(info={"estopped": True}))
+    out = asyncio.run(Cell(ok, ROBOT).estop_once())
+    assert out["answered"] is True and out["estopped"] is True and out["ms"] >= 0
+    refused = OneAnswer(RemoteError("hold not written to joint3", code="estop_failed"))
+    out = asyncio.run(Cell(refused, ROBOT).estop_once())
+    assert out == {**out, "answered": True, "estopped": False, "code": "estop_failed"} and refused.sent == 1
