@@ -208,6 +208,8 @@ class PrivateCell:
         if self._follow_fd is not None:
             os.close(self._follow_fd)
             self._follow_fd = None
+        if self.owner and read_record(self.port) is None and not followed(self.port):
+            follow_lock_path(self.port).unlink(missing_ok=True)  # the cell is gone: leave nothing behind
 
     def __enter__(self) -> PrivateCell:
         return self

@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from common.zenoh_config import free_tcp_port
-from services.private_cell import pid_alive, port_free, read_record
+from services.private_cell import pid_alive, port_free, read_record, stop_cell
 from tests.conftest import REPO, shared_data
 
 FAST = ["--object", "milk", "--views", "3", "--profile", "ideal", "--physics", "geometric", "--width", "320",
@@ -71,10 +71,23 @@ def kill_cli_mid_scan(tmp_path: Path, grace: float) -> tuple[int, Path, dict]:
                 "--cell-grace", str(grace), "--json", out=tmp_path / "cli.out")
     try:
         rec = wait_for(lambda: running_cell(port), 300, "the acquisition to run")
+    except BaseException:
+        stop_cell(port)
+        raise
     finally:
         os.killpg(cli.pid, signal.SIGKILL)  # no clean-up of any kind: the terminal is gone
         cli.wait(10)
     return port, session, rec
+
+
+@pytest.fixture
+def cleanup():
+    """Ports whose private cell is stopped after the test, whatever happened in it."""
+    ports: list[int] = []
+    yield ports
+    for port in ports:
+        if read_record(port) is not None:
+            stop_cell(port)
 
 
 def group_members(pgids: set[int]) -> list[int]:
@@ -97,8 +110,9 @@ def cell_gone(port: int, rec: dict) -> bool:
 
 @pytest.mark.slow
 @pytest.mark.timeout(1200)
-def test_a_killed_cli_leaves_an_acquisition_that_finishes_then_its_cell_stops(tmp_path):
+def test_a_killed_cli_leaves_an_acquisition_that_finishes_then_its_cell_stops(tmp_path, cleanup):
     port, session, rec = kill_cli_mid_scan(tmp_path, grace=2.0)
+    cleanup.append(port)
     assert {"router", "orchestrator", "registration"} <= set(rec["processes"])
     assert all(pid_alive(p) for p in rec["processes"].values())  # the acquisition goes on headless
     final = wait_for(lambda: journal(session).get("status") in ("done", "failed", "stopped")
@@ -109,8 +123,9 @@ def test_a_killed_cli_leaves_an_acquisition_that_finishes_then_its_cell_stops(tm
 
 @pytest.mark.slow
 @pytest.mark.timeout(900)
-def test_resume_attaches_to_the_running_acquisition_status_lists_the_cell_and_down_stops_it(tmp_path):
+def test_resume_attaches_to_the_running_acquisition_status_lists_the_cell_and_down_stops_it(tmp_path, cleanup):
     port, session, rec = kill_cli_mid_scan(tmp_path, grace=600.0)
+    cleanup.append(port)
     attached = spawn("scan", "--resume", str(session), "--port", str(port), out=tmp_path / "attach.out")
     try:
         wait_for(lambda: "attached" in (tmp_path / "attach.out").read_text(), 120, "the resume to attach")
