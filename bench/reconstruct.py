@@ -178,7 +178,9 @@ def measure(name: str, tmp: Path, sessions: Path, env: dict[str, str], seed: int
     """One object: record its session, reconstruct it with the CLI, run the peer, read and score the outputs."""
     session, truth = session_and_truth(object_set, name, sessions, seed)
     out = tmp / f"{name}_out"
+    load = os.getloadavg()[0]
     row: dict[str, Any] = {"set": object_set, "object": name, **run_cli(session, out, truth, env)}
+    row["load_average_1min"] = [round(load, 2), round(os.getloadavg()[0], 2)]  # before and after the CLI
     row["seconds"] = row["wall_s"]
     if not (out / "report.json").is_file() or not (out / "model.ply").is_file():
         return row  # no model: nothing to score (the exit code and stderr say why)
@@ -197,10 +199,16 @@ def measure(name: str, tmp: Path, sessions: Path, env: dict[str, str], seed: int
         "static_max_trans_err_mm": report["summary"].get("max_trans_err_mm"),
         "global_fallbacks": sum(s.get("path") == "global" for s in scans),
         "global_fallback_fraction": sum(s.get("path") == "global" for s in scans) / max(1, len(scans)),
+        # where the static stage's time went: the slowest view, and the views that needed the global path
+        "static_view_s_max": max((v.get("seconds", 0.0) for v in views), default=None),
+        "fallback_views_s": round(sum(v.get("seconds", 0.0) for v in views
+                                      if any(isinstance(s, dict) and s.get("path") == "global"
+                                             for s in v.get("scans", []))), 3),
         "configurations_run": sorted(model.get("candidates", {})),
         "configuration": model.get("configuration"),
         "accepted": accepted(report),
         "dynamic_s": timings.get("total_s"),
+        "dynamic_timings": timings,
         "reconstruct_report_s": report.get("seconds_total"),
     })
     peer_model = tmp / f"{name}_peer.ply"
