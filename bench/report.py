@@ -18,9 +18,9 @@ def flatten(figures: dict[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
             rows.extend(flatten(value, name + "."))
         elif isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
             for i, item in enumerate(value):
-                label = "/".join(str(item[k]) for k in ("set", "object") if k in item) or str(i)
+                label = ":".join(str(item[k]) for k in ("set", "object") if k in item) or str(i)
                 rows.extend(flatten({k: v for k, v in item.items() if k not in ("set", "object")},
-                                    f"{name}[{label}]."))
+                                    f"{name}.{label}."))
         else:
             rows.append((name, value))
     return rows

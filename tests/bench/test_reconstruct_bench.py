@@ -132,6 +132,25 @@ def test_the_peer_registers_turned_views_from_the_commanded_turns(tmp_path):
         assert angle < 2.0 and np.linalg.norm(err[:3, 3]) < 0.005
 
 
+def test_the_printed_table_labels_each_object_by_set_and_name():
+    from bench.report import flatten
+
+    rows = flatten({"objects": [{"set": "harsh", "object": "box", "seconds": 1.5, "dynamic_timings": {"fuse_s": 0.1}}],
+                    "median_wall_s": 1.5})
+    assert rows == [("objects.harsh:box.seconds", 1.5), ("objects.harsh:box.dynamic_timings.fuse_s", 0.1),
+                    ("median_wall_s", 1.5)]
+
+
+def test_set_is_refused_by_a_bench_without_object_sets(capsys):
+    from argparse import Namespace
+
+    from services.cli.cmd_bench import available, run
+
+    assert "harsh_set" not in available() and "multiway_peer" not in available() and "reconstruct" in available()
+    assert run(Namespace(name="transport", quick=True, object_set="harsh", json=None)) == 2
+    assert "--set is for reconstruct" in capsys.readouterr().out
+
+
 @pytest.mark.slow
 def test_bench_reconstruct_writes_every_object_with_the_peer(tmp_path):
     """``objscan bench reconstruct --set harsh --quick --json F``: the box, objscan and the peer, one entry."""
