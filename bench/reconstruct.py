@@ -145,9 +145,11 @@ def session_for(name: str, folder: Path, seed: int = 0) -> Path:
 def set_objects(object_set: str, quick: bool = False) -> list[tuple[str, str]]:
     """(set, object) pairs to measure: ``object_set`` is "harsh", "realistic" or "all" (harsh first)."""
     from bench import harsh_set
+    from common.errors import ObjscanError
 
     if object_set not in SET_CHOICES:
-        raise ValueError(f"unknown set {object_set!r}; known: {', '.join(SET_CHOICES)}")
+        raise ObjscanError(f"unknown object set {object_set!r}; known: {', '.join(SET_CHOICES)}",
+                           code="bad_value", detail={"known": list(SET_CHOICES)})
     names = {"harsh": harsh_set.NAMES, "realistic": OBJECTS}
     sets = SETS if object_set == "all" else (object_set,)
     return [(s, n) for s in sets for n in (names[s][:1] if quick else names[s])]

@@ -13,6 +13,7 @@ import pytest
 
 from bench import harsh_set
 from bench.reconstruct import set_objects, summarize
+from common.errors import ObjscanError
 from services.sim.catalogue import load_object
 from services.sim.profiles import get_profile
 
@@ -72,8 +73,9 @@ def test_the_sets_and_their_quick_picks():
     assert set_objects("harsh") == [("harsh", n) for n in harsh_set.NAMES]
     assert set_objects("all", quick=True) == [("harsh", "box"), ("realistic", "milk")]
     assert [s for s, _ in set_objects("all")].count("realistic") == 3
-    with pytest.raises(ValueError):
+    with pytest.raises(ObjscanError) as err:
         set_objects("textured")
+    assert err.value.code == "bad_value"
 
 
 def _row(name: str, seconds: float, ratio: float | None, peer: float | None, accepted: bool = True) -> dict:
