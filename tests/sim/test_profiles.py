@@ -36,7 +36,7 @@ def hand_turns(world: World, n: int, angle: float = 30.0) -> tuple[np.ndarray, n
 
 
 def test_profiles_are_selectable_and_configurable():
-    assert set(profile_names()) == {"ideal", "hand-turned", "realistic", "robot-turned"}
+    assert set(profile_names()) == {"ideal", "hand-turned", "realistic", "harsh", "robot-turned"}
     assert get_profile("hand_turned").name == "hand-turned"
     p = get_profile("robot-turned", slip_prob=0.5, turn_gain_range=[1.0, 1.2])
     assert p.slip_prob == 0.5 and p.turn_gain_range == (1.0, 1.2)
