@@ -240,16 +240,16 @@ class SessionRecorder:
         budget and the queue's bounds; otherwise it is dropped and counted."""
         if self._closed:
             return
-        if self._admit(key, len(payload)):
+        if self._admit(key, len(payload), self._budget(key)):
             self._enqueue_sample(key, bytes(payload), time.time() if t_received is None else t_received)
 
     def _budget(self, key: str) -> Budget:
         budget = self._budgets.get(key)
         return budget if budget is not None else stream_budget(key, self.config.sample_budget)
 
-    def _admit(self, key: str, size: int) -> bool:
-        """Whether a sample of ``size`` bytes on ``key`` fits its budget and the pending bytes (reserved if so)."""
-        if size > self._budget(key).max_bytes:
+    def _admit(self, key: str, size: int, budget: Budget) -> bool:
+        """Whether a sample of ``size`` bytes on ``key`` fits ``budget`` and the pending bytes (reserved if so)."""
+        if size > budget.max_bytes:
             self._drop(key, "over_budget", size)
             return False
         with self._pending_lock:
@@ -282,7 +282,7 @@ class SessionRecorder:
             per_key[reason] = per_key.get(reason, 0) + 1
         if first:
             event(log, "recording drops samples", logging.WARNING, key=key, reason=reason, bytes=size,
-                  max_bytes=self._budget(key).max_bytes, max_pending_bytes=self.config.max_pending_bytes)
+                  max_pending_bytes=self.config.max_pending_bytes)
 
     def pending_bytes(self) -> int:
         """Bytes of stream samples queued and not yet written (bounded by ``max_pending_bytes``)."""
@@ -303,10 +303,11 @@ class SessionRecorder:
         for key in keys:
             self._budgets.setdefault(key, self._budget(key))
         for key in keys:
-            def on_sample(sample: Any, key: str = key) -> None:
+            def on_sample(sample: Any, budget: Budget = self._budgets[key]) -> None:
+                name = str(sample.key_expr)  # the sample's own key (the subscription's may be a wildcard)
                 size = len(sample.payload)  # checked before the payload is copied out of Zenoh
-                if not self._closed and self._admit(key, size):
-                    self._enqueue_sample(key, sample.payload.to_bytes(), time.time())
+                if not self._closed and self._admit(name, size, budget):
+                    self._enqueue_sample(name, sample.payload.to_bytes(), time.time())
 
             self._subscriptions.append(session.declare_subscriber(key, on_sample))
 
