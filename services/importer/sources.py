@@ -5,7 +5,7 @@ by the last number in the names, in that number's order = the turn order); intri
 (or ``intrinsics.json`` in the folder); a recording carries its own.
 
 Frames are streamed: ``--every`` is applied while reading (a folder decodes only the pairs it keeps, a
-recording drops each skipped frame as soon as it is read), and at most ``max_frames`` are kept, so a long
+recording reads past the others without aligning or copying them), and at most ``max_frames`` are kept, so a long
 recording or folder never sits in memory whole (``too_many_frames`` says which ``--every`` would fit).
 """
 
@@ -82,8 +82,9 @@ def read_folder(folder: Path, intrinsics: Intrinsics | None, depth_scale: float,
         yield frame
 
 
-def read_recording(path: Path) -> Iterator[RGBDFrame]:
-    """Every frame of a RealSense ``.bag``/``.db3`` recording, depth aligned to color, in recorded order."""
+def read_recording(path: Path, every: int = 1) -> Iterator[RGBDFrame]:
+    """One frame in ``every`` of a RealSense ``.bag``/``.db3`` recording, depth aligned to color, in recorded
+    order (``seq`` = the frame's index in the recording); the others are read past, never aligned or copied."""
     from services.camera.errors import EndOfReplay, ReplayDataError
     from services.camera.realsense.camera import RealSenseCamera
     from services.camera.realsense.config import RealSenseCameraConfig
@@ -94,6 +95,10 @@ def read_recording(path: Path) -> Iterator[RGBDFrame]:
         k = 0
         while True:
             try:
+                if k % every:
+                    cam.skip_frame()
+                    k += 1
+                    continue
                 frame = cam.capture(None)
             except EndOfReplay:
                 break
@@ -115,25 +120,19 @@ def read_recording(path: Path) -> Iterator[RGBDFrame]:
 def iter_frames(source: str | Path, intrinsics: Intrinsics | None = None, depth_scale: float = 0.001,
                 every: int = 1, max_frames: int | None = MAX_FRAMES) -> Iterator[RGBDFrame]:
     """The frames of ``source`` (folder or recording) to keep, one in ``every``, as they are read: a skipped
-    frame is never decoded (folder) or dropped at once (recording), so at most one frame beyond those kept
-    is alive at any time."""
+    frame is never decoded (folder) or never aligned or copied (recording), so no frame beyond those kept
+    is held."""
     if isinstance(every, bool) or not isinstance(every, int) or every < 1:
         raise ImportError_("every must be at least 1", code="bad_value", detail={"every": repr(every)[:40]})
     src = Path(source)
     if src.is_dir():
         yield from read_folder(src, intrinsics, depth_scale, every, max_frames)
     elif src.is_file() and src.suffix.lower() in RECORDING_SUFFIXES:
-        kept = k = 0
-        for frame in read_recording(src):  # not enumerate(): its reused tuple holds the last frame meanwhile
-            k += 1
-            if (k - 1) % every:
-                del frame  # not kept: released before the next frame is read
-                continue
-            kept += 1
+        for kept, frame in enumerate(read_recording(src, every), start=1):  # only kept frames are aligned, copied
             if max_frames is not None and kept > max_frames:
                 raise _too_many(kept, every, max_frames)
             yield frame
-            del frame
+            del frame  # held by the caller only
     else:
         raise ImportError_(f"{src} is neither a folder of RGB-D images nor a .bag/.db3 recording",
                            code="bad_source")

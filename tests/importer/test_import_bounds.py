@@ -2,9 +2,9 @@
 
 - ``--out`` must be absent or empty, like a new scan's: a finished session given as ``--out`` used to get
   some of its views and its ``session.json`` replaced while its journal, model and recording stayed.
-- ``--every`` is applied while reading: a folder decodes only the pairs it keeps, a recording drops each
-  skipped frame at once; it used to load every frame, then keep one in N. Checked on what is decoded and
-  held (weak references to every frame made), not on the process's memory.
+- ``--every`` is applied while reading: a folder decodes only the pairs it keeps, a recording reads past
+  the others without aligning or copying them; it used to load every frame, then keep one in N. Checked
+  on what is decoded and held (weak references to every frame made), not on the process's memory.
 """
 
 from __future__ import annotations
@@ -111,33 +111,31 @@ def test_every_is_applied_while_reading_an_image_folder(tmp_path, monkeypatch):
     assert [int(f.color[0, 0, 0]) for f in frames] == [k % 256 for k in range(0, 300, 25)]  # the right ones, in order
 
 
+@pytest.mark.timeout(180)
 def test_every_is_applied_while_reading_a_recording(tmp_path, monkeypatch):
-    """A 3000-frame recording read with ``every=100``: 30 kept and at most one other frame alive at a time
-    (was: all 3000 held before one in 100 was kept)."""
-    path = tmp_path / "long.db3"
-    path.write_bytes(b"")
+    """A 12-frame ``.db3`` (librealsense's own recorder) read with ``every=4``: only frames 0, 4, 8 are captured
+    (aligned and copied), the others are read past, and no frame is held beyond those kept (was: all 12
+    captured and held, then one in 4 kept)."""
+    pytest.importorskip("pyrealsense2")
+    from bench.software_d435 import record_db3
+    from services.camera.realsense.camera import RealSenseCamera
+    from tests.camera.test_realsense_playback import SPEC, _frames
+
+    base = _frames()
+    pairs = []
+    for k in range(12):
+        depth, color = base[k % len(base)]
+        color = color.copy()
+        color[:8, :8] = k  # the frame's number, in the corner
+        pairs.append((depth, color))
+    path = record_db3(tmp_path / "long.db3", pairs, SPEC)
     alive = _Alive()
-    intr = Intrinsics(fx=5.0, fy=5.0, cx=4.0, cy=3.0, width=8, height=6)
-    held_while_reading: list[int] = []
-
-    def recording(p: Path):
-        for k in range(3000):
-            held_while_reading.append(alive.alive())
-            frame = alive.made(RGBDFrame(color=np.full((6, 8, 3), k % 256, np.uint8),
-                                         depth=np.full((6, 8), 500, np.uint16), depth_scale=0.001,
-                                         intrinsics=intr, T_base_camera=np.eye(4), seq=k))
-            yield frame
-            del frame
-
-    monkeypatch.setattr(sources, "read_recording", recording)
-    kept = []
-    for frame in iter_frames(path, every=100):
-        kept.append(frame)
-    assert [f.seq for f in kept] == list(range(0, 3000, 100))
-    assert len(alive.refs) == 3000  # a recording is read in order: every frame is decoded once...
-    assert alive.peak <= len(kept) + 1  # ...but a skipped one is gone before the next is read
-    # when frame k is read, alive are the frames kept before it and at most the one read just before
-    assert max(h - (k + 99) // 100 for k, h in enumerate(held_while_reading)) <= 1
+    capture = RealSenseCamera.capture
+    monkeypatch.setattr(RealSenseCamera, "capture", lambda self, *a: alive.made(capture(self, *a)))
+    frames = list(iter_frames(path, every=4))
+    assert [int(f.color[2, 2, 0]) for f in frames] == [0, 4, 8] and [f.seq for f in frames] == [0, 4, 8]
+    assert len(alive.refs) == 3  # only the kept frames were aligned and copied
+    assert alive.peak <= 3
 
 
 def test_a_sequence_beyond_max_frames_is_refused_before_decoding(tmp_path, monkeypatch):
@@ -153,14 +151,15 @@ def test_a_sequence_beyond_max_frames_is_refused_before_decoding(tmp_path, monke
 
 
 def test_too_many_frames_from_a_recording_stops_reading(tmp_path, monkeypatch):
+    """A long recording past ``max_frames``: reading stops at the first frame too many, not at its end."""
     path = tmp_path / "long.bag"
     path.write_bytes(b"")
     intr = Intrinsics(fx=5.0, fy=5.0, cx=4.0, cy=3.0, width=8, height=6)
-    read = []
+    captured = []
 
-    def recording(p: Path):
-        for k in range(10_000):
-            read.append(k)
+    def recording(p: Path, every: int):
+        for k in range(0, 10_000, every):  # what the reader captures: one frame in ``every``
+            captured.append(k)
             yield RGBDFrame(color=np.zeros((6, 8, 3), np.uint8), depth=np.zeros((6, 8), np.uint16),
                             depth_scale=0.001, intrinsics=intr, T_base_camera=np.eye(4), seq=k)
 
@@ -168,4 +167,4 @@ def test_too_many_frames_from_a_recording_stops_reading(tmp_path, monkeypatch):
     with pytest.raises(ImportError_) as exc:
         read_frames(path, every=3, max_frames=20)
     assert exc.value.code == "too_many_frames"
-    assert len(read) == 61  # stopped at the 21st kept frame, not at the end of the recording
+    assert len(captured) == 21  # stopped at the 21st kept frame, not at the end of the recording
