@@ -16,6 +16,16 @@ COPY services ./services
 COPY bench ./bench
 RUN uv pip install --system --no-cache --no-deps .
 
+# Every service runs as the unprivileged user `objscan`, never root. Build it with the host user's uid/gid
+# (docker-compose.yml passes OBJSCAN_UID/OBJSCAN_GID) so the orchestrator can write ./sessions and ./models.
+# Devices are opened by group, given per container in compose (group_add): the arm `dialout` (the U2D2),
+# the camera `plugdev` (the RealSense nodes the host's udev rules make); the image's user is in neither.
+ARG OBJSCAN_UID=1000
+ARG OBJSCAN_GID=1000
+RUN groupadd --non-unique --gid "${OBJSCAN_GID}" objscan \
+ && useradd --non-unique --uid "${OBJSCAN_UID}" --gid "${OBJSCAN_GID}" --create-home --shell /usr/sbin/nologin objscan
+USER objscan:objscan
+
 # Services join the router named in OBJSCAN_ZENOH_CONNECT as clients (set by docker-compose.yml).
 ENV OBJSCAN_ZENOH_MODE=client \
     OBJSCAN_ZENOH_CONNECT=tcp/zenoh-router:7447 \

@@ -38,6 +38,20 @@ class SessionFolderError(ObjscanError):
     code = "bad_session"
 
 
+def new_folder_refusal(path: Path, allowed: frozenset[str] = frozenset()) -> str | None:
+    """Why ``path`` cannot receive a new session, or None when it can: it must be absent or an empty folder
+    (names in ``allowed`` aside). Every writer of a new session (a scan, an import) asks this before it
+    writes anything, so a session never merges into a folder it did not create."""
+    path = Path(path)
+    if not path.exists():
+        return None
+    if not path.is_dir():
+        return "is not a folder"
+    if any(p.name not in allowed for p in path.iterdir()):
+        return "is not an empty folder"
+    return None
+
+
 def view_dir(session: Path, view: int) -> Path:
     return Path(session) / f"view_{view:02d}"
 

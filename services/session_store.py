@@ -34,6 +34,7 @@ from common.errors import ObjscanError
 from common.messages import Plane, PointCloud, RGBDFrame
 from common.session_folder import (
     atomic_write_json,
+    new_folder_refusal,
     read_scan,
     scan_complete,
     view_dir,
@@ -75,9 +76,10 @@ class SessionStore:
         """A new session in ``path``, which must be absent or an empty folder (checked before creating it);
         ``logs/`` alone is allowed: ``objscan scan`` starts the cell, logging there, before the session."""
         path = Path(path)
-        if path.exists() and (not path.is_dir() or any(p.name not in PRE_SESSION for p in path.iterdir())):
+        refusal = new_folder_refusal(path, PRE_SESSION)
+        if refusal is not None:
             what = "already holds a session; resume it or choose another folder" if (path / JOURNAL).is_file() \
-                else "is not an empty folder"
+                else refusal
             raise NotASession(f"{path} {what}", detail={"path": str(path)})
         store = cls(path)
         store.reserve_space()

@@ -77,7 +77,12 @@ def run(args) -> int:  # noqa: ANN001
     services = hardware_services(backends)
     camera = ["--session", args.session] if args.session else []
     camera += [a for key, value in args.option for a in ("--option", f"{key}={value}")]
-    extra = {"camera": camera} if camera else None
+    extra: dict[str, list[str]] = {"camera": camera} if camera else {}
+    if args.backend == "sim":  # a mesh path: the twin started here may load it (services/sim/object_roots.py)
+        from services.sim.object_roots import start_args
+
+        if start_args(args.object):
+            extra["sim"] = start_args(args.object)
     robot = keys.DEFAULT_ROBOT
     if args.connect:  # a running cell elsewhere: use its services, start nothing
         try:
@@ -90,7 +95,7 @@ def run(args) -> int:  # noqa: ANN001
         finally:
             session.close()
     else:
-        with ensure_cell(args.port, backends, out / "logs", services=services, extra_args=extra) as group:
+        with ensure_cell(args.port, backends, out / "logs", services=services, extra_args=extra or None) as group:
             frame, ms = _capture(group.session, args, robot)
     import io
 

@@ -12,6 +12,8 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
+from rich.markup import escape
+
 from services.cli.cmd_scan import console
 
 
@@ -24,7 +26,7 @@ def register(sub) -> None:  # noqa: ANN001
     p = sub.add_parser("import", help="turn a fixed-camera RGB-D sequence into a session folder",
                        description=__doc__.split("\n\n")[1] if __doc__ else None)
     p.add_argument("source", help="folder of RGB-D images, or a RealSense .bag/.db3 recording")
-    p.add_argument("--out", required=True, help="session folder to write")
+    p.add_argument("--out", required=True, help="session folder to write: absent or empty (refused otherwise)")
     p.add_argument("--intrinsics", help="color intrinsics 'fx,fy,cx,cy' (pixels) or a JSON file; "
                                         "required for a folder without intrinsics.json")
     p.add_argument("--depth-scale", type=float, default=0.001, help="metres per depth unit (default 0.001)")
@@ -33,7 +35,10 @@ def register(sub) -> None:  # noqa: ANN001
                         "estimate every turn")
     p.add_argument("--direction", choices=["ccw", "cw", "unknown"], default="unknown",
                    help="turn direction seen from above (default: unknown, both are tried)")
-    p.add_argument("--every", type=int, default=1, help="keep one frame in N (default 1)")
+    p.add_argument("--every", type=int, default=1,
+                   help="keep one frame in N, applied while reading: skipped frames are never held (default 1)")
+    p.add_argument("--max-frames", type=int, default=None,
+                   help="refuse a sequence that keeps more frames than this (default 360; use --every)")
     p.add_argument("--object", default="imported", help="object name written to session.json")
     p.add_argument("--camera-up", default=None,
                    help="the world's up in the camera's optical frame 'x,y,z' (default 0,-1,0: an upright camera)")
@@ -55,10 +60,12 @@ def run(args) -> int:  # noqa: ANN001
             camera_up=tuple(float(v) for v in args.camera_up.split(",")))
         cfg = ImportConfig(turn_step_deg=args.turn_step, direction=args.direction, every=args.every,
                            depth_scale=args.depth_scale, object_name=args.object, base=base)
+        if args.max_frames is not None:
+            cfg = replace(cfg, max_frames=args.max_frames)
         if args.no_focal_calibration:
             cfg = replace(cfg, focal=replace(cfg.focal, enabled=False))
     except (ValueError, ImportError_) as exc:
-        console.print(f"[red]error:[/red] {exc}")
+        console.print(f"[red]error:[/red] {escape(str(exc))}")
         return 2
 
     def progress(info: dict) -> None:
@@ -67,7 +74,9 @@ def run(args) -> int:  # noqa: ANN001
     try:
         report = import_sequence(args.source, Path(args.out), intr, cfg, progress=progress)
     except ImportError_ as exc:
-        console.print(f"[red]error[/red] [{exc.code}] {exc.message} {json.dumps(exc.detail, default=str)}")
+        # escaped: "[code]" would otherwise be read as console markup and vanish from the message
+        console.print(f"[red]error[/red] {escape(f'[{exc.code}] {exc.message}')} "
+                      f"{escape(json.dumps(exc.detail, default=str))}")
         return 1
     t = report["turns"]
     console.print(f"session: {args.out}; {report['views']} views of {report['frames']} frames; turns {t['source']}, "

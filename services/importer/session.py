@@ -17,11 +17,11 @@ import numpy as np
 
 from common.errors import ObjscanError
 from common.messages import Intrinsics
-from common.session_folder import write_scan, write_session
+from common.session_folder import new_folder_refusal, write_scan, write_session
 from services.importer.base_frame import BaseFrameConfig, estimate_base_frame
-from services.importer.errors import ImportError_
+from services.importer.errors import ImportError_, OutNotEmpty
 from services.importer.selfcal import FocalSearchConfig, calibrate_focal, scale_intrinsics
-from services.importer.sources import read_frames
+from services.importer.sources import MAX_FRAMES, read_frames
 from services.importer.turns import DIRECTIONS, pair_searches, plan_turns
 from services.registration.dynamic.turn4dof import TurnSearchConfig
 from services.registration.dynamic.views import view_from_static
@@ -34,7 +34,8 @@ class ImportConfig:
 
     turn_step_deg: float | None = None  # None: estimate each turn
     direction: str = "unknown"  # "ccw" | "cw" (seen from above) | "unknown": try both
-    every: int = 1  # keep one frame in this many (a 30 fps recording of a slow turntable)
+    every: int = 1  # keep one frame in this many (a 30 fps recording of a slow turntable), applied while reading
+    max_frames: int = MAX_FRAMES  # frames kept at most (they are held until the turns are found)
     depth_scale: float = 0.001  # m per depth unit (folder sources; a recording carries its own)
     object_name: str = "imported"
     base: BaseFrameConfig = field(default_factory=BaseFrameConfig)
@@ -48,17 +49,25 @@ class ImportConfig:
             raise ValueError(f"turn_step_deg must be in (0, 180), got {self.turn_step_deg}")
         if self.every < 1:
             raise ValueError(f"every must be at least 1, got {self.every}")
+        if self.max_frames < 3:
+            raise ValueError(f"max_frames must be at least 3, got {self.max_frames}")
 
 
 def import_sequence(source: str | Path, out_dir: str | Path, intrinsics: Intrinsics | None = None,
                     config: ImportConfig | None = None, static: StaticConfig | None = None,
                     progress: Any = None) -> dict[str, Any]:
-    """Import ``source`` into the session folder ``out_dir``; returns the import report (also in session.json)."""
+    """Import ``source`` into the session folder ``out_dir``; returns the import report (also in session.json).
+
+    ``out_dir`` must be absent or an empty folder, like a new scan's (``OutNotEmpty`` otherwise, with nothing
+    written): an import into a finished session would replace some of its views and keep its journal, model
+    and recording, a session that no longer says what it holds."""
     cfg = config or ImportConfig()
     st = static or StaticConfig()
     say = progress or (lambda info: None)
     t0 = time.perf_counter()
-    frames = read_frames(source, intrinsics, cfg.depth_scale, cfg.every)
+    out = Path(out_dir)
+    _check_out(out)
+    frames = read_frames(source, intrinsics, cfg.depth_scale, cfg.every, cfg.max_frames)
     say({"stage": "read", "frames": len(frames), "seconds": round(time.perf_counter() - t0, 2)})
     base = estimate_base_frame(frames, cfg.base, st)
     say({"stage": "base_frame", "camera_height_m": round(base.camera_height_m, 4),
@@ -90,7 +99,7 @@ def import_sequence(source: str | Path, out_dir: str | Path, intrinsics: Intrins
         for f in kept:
             f.T_base_camera = base.T_base_camera.copy()
     say({"stage": "focal", **calib.to_json()})
-    out = Path(out_dir)
+    _check_out(out)  # again: the folder may have been filled while the frames were processed
     out.mkdir(parents=True, exist_ok=True)
     for k, f in enumerate(kept):
         write_scan(out, k, 0, f, extra={"pose_source": "table_plane", "source_frame": int(f.seq)})
@@ -113,3 +122,11 @@ def import_sequence(source: str | Path, out_dir: str | Path, intrinsics: Intrins
         "import": report,
     })
     return report
+
+
+def _check_out(out: Path) -> None:
+    """Refuse an ``--out`` that is not absent or empty (``OutNotEmpty``), before anything is written."""
+    refusal = new_folder_refusal(out)
+    if refusal is not None:
+        raise OutNotEmpty(f"{out} {refusal}: an import writes a new session, into an absent or empty folder "
+                          "(choose another --out)", detail={"path": str(out)})

@@ -3,6 +3,10 @@
 A folder is read as the ``png_folder`` camera reads it (``services/camera/png_folder/frames.py``: pairing
 by the last number in the names, in that number's order = the turn order); intrinsics come from the caller
 (or ``intrinsics.json`` in the folder); a recording carries its own.
+
+Frames are streamed: ``--every`` is applied while reading (a folder decodes only the pairs it keeps, a
+recording reads past the others without aligning or copying them), and at most ``max_frames`` are kept, so a long
+recording or folder never sits in memory whole (``too_many_frames`` says which ``--every`` would fit).
 """
 
 from __future__ import annotations
@@ -42,20 +46,45 @@ def pair_images(folder: Path) -> list[tuple[int, Path, Path]]:
         return frames.pair_images(folder)
 
 
-def read_folder(folder: Path, intrinsics: Intrinsics | None, depth_scale: float) -> Iterator[RGBDFrame]:
-    """Frames of an image folder, in turn order; the base pose is left as identity (set later)."""
+#: Frames an import keeps at most (after ``every``): about 1.5 MB each at 640 x 480, all held until the table
+#: and the turns are found. One a degree over a full turn; a longer sequence needs ``--every``.
+MAX_FRAMES = 360
+
+
+def _too_many(kept_at_least: int, every: int, max_frames: int, total: int | None = None) -> ImportError_:
+    detail: dict[str, object] = {"kept_at_least": kept_at_least, "every": every, "max_frames": max_frames}
+    hint = ""
+    if total is not None:
+        detail["frames"] = total
+        need = -(-total // max_frames)
+        detail["every_needed"] = need
+        hint = f" (the source has {total} frames: --every {need} or more)"
+    return ImportError_(f"keeping one frame in {every} gives more than {max_frames} frames{hint}; keep fewer "
+                        "with --every", code="too_many_frames", detail=detail)
+
+
+def read_folder(folder: Path, intrinsics: Intrinsics | None, depth_scale: float, every: int = 1,
+                max_frames: int | None = None) -> Iterator[RGBDFrame]:
+    """The kept frames (one pair in ``every``) of an image folder, in turn order, decoded one at a time;
+    the base pose is left as identity (set later). More than ``max_frames`` kept is refused before any
+    image is decoded."""
     with _as_import_error():
         intrinsics = frames.folder_intrinsics(folder, intrinsics)
     if not (depth_scale > 0 and np.isfinite(depth_scale)):
         raise ImportError_("depth_scale must be positive", code="bad_value", detail={"depth_scale": depth_scale})
-    for n, cpath, dpath in pair_images(folder):
+    pairs = pair_images(folder)
+    kept = pairs[::every]
+    if max_frames is not None and len(kept) > max_frames:
+        raise _too_many(len(kept), every, max_frames, total=len(pairs))
+    for n, cpath, dpath in kept:
         with _as_import_error():
             frame = frames.read_pair(n, cpath, dpath, intrinsics, depth_scale)
         yield frame
 
 
-def read_recording(path: Path) -> Iterator[RGBDFrame]:
-    """Every frame of a RealSense ``.bag``/``.db3`` recording, depth aligned to color, in recorded order."""
+def read_recording(path: Path, every: int = 1) -> Iterator[RGBDFrame]:
+    """One frame in ``every`` of a RealSense ``.bag``/``.db3`` recording, depth aligned to color, in recorded
+    order (``seq`` = the frame's index in the recording); the others are read past, never aligned or copied."""
     from services.camera.errors import EndOfReplay, ReplayDataError
     from services.camera.realsense.camera import RealSenseCamera
     from services.camera.realsense.config import RealSenseCameraConfig
@@ -66,6 +95,10 @@ def read_recording(path: Path) -> Iterator[RGBDFrame]:
         k = 0
         while True:
             try:
+                if k % every:
+                    cam.skip_frame()
+                    k += 1
+                    continue
                 frame = cam.capture(None)
             except EndOfReplay:
                 break
@@ -75,6 +108,7 @@ def read_recording(path: Path) -> Iterator[RGBDFrame]:
             # pose is expected: the fixed camera's pose comes from the table, like a folder's frames
             frame.meta = {k_: v for k_, v in (frame.meta or {}).items() if k_ != "pose_source"}
             yield frame
+            del frame  # the caller keeps it or not: not this reader
             k += 1
     except ReplayDataError as exc:
         raise ImportError_(f"cannot read the recording {path}: {exc.message}", code="bad_recording",
@@ -83,20 +117,32 @@ def read_recording(path: Path) -> Iterator[RGBDFrame]:
         cam.disconnect()
 
 
-def read_frames(source: str | Path, intrinsics: Intrinsics | None = None, depth_scale: float = 0.001,
-                every: int = 1) -> list[RGBDFrame]:
-    """All frames of ``source`` (folder or recording), keeping one in ``every``."""
+def iter_frames(source: str | Path, intrinsics: Intrinsics | None = None, depth_scale: float = 0.001,
+                every: int = 1, max_frames: int | None = MAX_FRAMES) -> Iterator[RGBDFrame]:
+    """The frames of ``source`` (folder or recording) to keep, one in ``every``, as they are read: a skipped
+    frame is never decoded (folder) or never aligned or copied (recording), so no frame beyond those kept
+    is held."""
+    if isinstance(every, bool) or not isinstance(every, int) or every < 1:
+        raise ImportError_("every must be at least 1", code="bad_value", detail={"every": repr(every)[:40]})
     src = Path(source)
     if src.is_dir():
-        frames = list(read_folder(src, intrinsics, depth_scale))
+        yield from read_folder(src, intrinsics, depth_scale, every, max_frames)
     elif src.is_file() and src.suffix.lower() in RECORDING_SUFFIXES:
-        frames = list(read_recording(src))
+        for kept, frame in enumerate(read_recording(src, every), start=1):  # only kept frames are aligned, copied
+            if max_frames is not None and kept > max_frames:
+                raise _too_many(kept, every, max_frames)
+            yield frame
+            del frame  # held by the caller only
     else:
         raise ImportError_(f"{src} is neither a folder of RGB-D images nor a .bag/.db3 recording",
                            code="bad_source")
-    if every < 1:
-        raise ImportError_("every must be at least 1", code="bad_value")
-    frames = frames[::every]
+
+
+def read_frames(source: str | Path, intrinsics: Intrinsics | None = None, depth_scale: float = 0.001,
+                every: int = 1, max_frames: int | None = MAX_FRAMES) -> list[RGBDFrame]:
+    """The frames of ``source`` (folder or recording) to import, keeping one in ``every`` while reading
+    (``iter_frames``); at least 3."""
+    frames = list(iter_frames(source, intrinsics, depth_scale, every, max_frames))
     if len(frames) < 3:
         raise ImportError_(f"a sequence needs at least 3 frames, found {len(frames)}", code="no_frames")
     return frames

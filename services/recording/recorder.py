@@ -18,6 +18,14 @@ exchange and at least every ``flush_interval_s``, so a killed orchestrator leave
 last flush on disk. Such a file has no summary/footer: ``read_recording`` reads it anyway and
 ``recover()`` rewrites it into a complete file. The tap and the subscriber callbacks only enqueue,
 so recording never blocks the orchestrator's event loop (encoding and compression happen off it).
+
+Bounded: a stream sample is recorded only within its key's ``Budget`` (``STREAM_BUDGETS``: the arm's
+joint state 64 kB, like a command; or ``subscribe(..., budgets=)``). The size is checked before the payload
+is copied out of Zenoh, the element count when it is decoded. Samples waiting for the writer are bounded in
+number (``queue_size``) and in bytes (``max_pending_bytes``). A sample beyond any bound is dropped and
+counted per key and reason (``dropped_by_key``: ``over_budget`` / ``queue_full``); the counts go into the
+``closed`` metadata record and the log. Exchanges are never dropped (each is one request the orchestrator
+waited for).
 """
 
 from __future__ import annotations
@@ -39,6 +47,7 @@ from common.codec import Message, decode, registered_types
 from common.errors import ObjscanError, RemoteError, ServiceUnavailable
 from common.log import event
 from common.messages import Error, JointState
+from common.runtime import COMMAND_BUDGET, Budget
 from common.version import objscan_version
 from services.recording import visual
 from services.recording.errors import RecordingError
@@ -90,6 +99,19 @@ def _mcap_metadata(data: dict[str, Any]) -> dict[str, str]:
     return {str(k): v if isinstance(v, str) else json.dumps(v, default=str) for k, v in data.items()}
 
 
+#: Budgets of the streams an acquisition records, by the end of their key (any robot): a joint state is
+#: command-sized (a few kB); a status update carries progress and figures, never bulk data.
+STREAM_BUDGETS: dict[str, Budget] = {
+    "/arm/state": COMMAND_BUDGET,
+    "/orchestrator/status": Budget(max_bytes=1024 * 1024, max_elements=1 << 16),
+}
+
+
+def stream_budget(key: str, default: Budget) -> Budget:
+    """The budget of a recorded stream's samples: ``STREAM_BUDGETS`` by key ending, else ``default``."""
+    return next((b for end, b in STREAM_BUDGETS.items() if key.endswith(end)), default)
+
+
 def _ns(t: float) -> int:
     return max(0, int(round(float(t) * 1e9)))
 
@@ -105,6 +127,8 @@ class RecorderConfig:
     visual: bool = True  # Foxglove channels (needs foxglove-sdk; skipped with a note if absent)
     state_visual_rate_hz: float = 10.0  # /tf and /arm/joints from the 50 Hz joint state, thinned
     queue_size: int = 20000  # pending items; beyond it stream samples are dropped (counted), never exchanges
+    max_pending_bytes: int = 32 * 1024 * 1024  # stream sample bytes waiting for the writer; beyond: dropped
+    sample_budget: Budget = Budget(max_bytes=1024 * 1024, max_elements=1 << 16)  # a key without its own budget
 
 
 def _compression(name: str) -> CompressionType:
@@ -146,7 +170,11 @@ class SessionRecorder:
         self._writer.start(profile="", library=LIBRARY)
         self.visual = self.config.visual and visual.available()
         self.counts: dict[str, int] = {}
-        self.dropped = 0
+        self.dropped = 0  # stream samples not recorded, all keys and reasons
+        self.dropped_by_key: dict[str, dict[str, int]] = {}  # key -> {"over_budget": n, "queue_full": n}
+        self._budgets: dict[str, Budget] = {}
+        self._pending_bytes = 0  # bytes of stream samples queued and not yet written
+        self._pending_lock = threading.Lock()
         self.errors: list[str] = []
         self.io_error: OSError | None = None  # the first write failure (disk full): the recording ended there
         self._channels: dict[str, int] = {}
@@ -208,23 +236,78 @@ class SessionRecorder:
         return send_recorded
 
     def record_sample(self, key: str, payload: bytes, t_received: float | None = None) -> None:
-        """Record one stream sample's exact payload (called from a Zenoh callback thread)."""
+        """Record one stream sample's exact payload (called from a Zenoh callback thread), within its key's
+        budget and the queue's bounds; otherwise it is dropped and counted."""
         if self._closed:
             return
+        if self._admit(key, len(payload), self._budget(key)):
+            self._enqueue_sample(key, bytes(payload), time.time() if t_received is None else t_received)
+
+    def _budget(self, key: str) -> Budget:
+        budget = self._budgets.get(key)
+        return budget if budget is not None else stream_budget(key, self.config.sample_budget)
+
+    def _admit(self, key: str, size: int, budget: Budget) -> bool:
+        """Whether a sample of ``size`` bytes on ``key`` fits ``budget`` and the pending bytes (reserved if so)."""
+        if size > budget.max_bytes:
+            self._drop(key, "over_budget", size)
+            return False
+        with self._pending_lock:
+            if self._pending_bytes + size > self.config.max_pending_bytes:
+                full = True
+            else:
+                full = False
+                self._pending_bytes += size
+        if full:
+            self._drop(key, "queue_full", size)
+        return not full
+
+    def _enqueue_sample(self, key: str, payload: bytes, t_received: float) -> None:
         try:
-            self._queue.put_nowait(("sample", key, bytes(payload), time.time() if t_received is None else t_received))
+            self._queue.put_nowait(("sample", key, payload, t_received))
         except queue.Full:
+            self._release(len(payload))
+            self._drop(key, "queue_full", len(payload))
+
+    def _release(self, size: int) -> None:
+        with self._pending_lock:
+            self._pending_bytes -= size
+
+    def _drop(self, key: str, reason: str, size: int) -> None:
+        """Count a dropped sample; the first of each key and reason is logged (the rest are in the counts)."""
+        with self._pending_lock:
             self.dropped += 1
+            per_key = self.dropped_by_key.setdefault(key, {})
+            first = reason not in per_key
+            per_key[reason] = per_key.get(reason, 0) + 1
+        if first:
+            event(log, "recording drops samples", logging.WARNING, key=key, reason=reason, bytes=size,
+                  max_pending_bytes=self.config.max_pending_bytes)
+
+    def pending_bytes(self) -> int:
+        """Bytes of stream samples queued and not yet written (bounded by ``max_pending_bytes``)."""
+        return self._pending_bytes
 
     def add_metadata(self, name: str, data: dict[str, Any]) -> None:
         if not self._closed:
             self._queue.put(("metadata", name, data))
 
-    def subscribe(self, session: Any, keys: Iterable[str]) -> None:
-        """Record every sample published on ``keys`` (a Zenoh session; e.g. arm state and status streams)."""
+    def subscribe(self, session: Any, keys: Iterable[str], budgets: dict[str, Budget] | None = None) -> None:
+        """Record every sample published on ``keys`` (a Zenoh session; e.g. arm state and status streams).
+
+        ``budgets``: key -> ``Budget`` (bytes and msgpack elements) a sample on that key may use; keys not
+        named get their ``STREAM_BUDGETS`` entry, else ``config.sample_budget``. A sample over its budget is
+        dropped before it is copied."""
+        keys = list(keys)
+        self._budgets.update(budgets or {})
         for key in keys:
-            def on_sample(sample: Any) -> None:
-                self.record_sample(str(sample.key_expr), sample.payload.to_bytes())
+            self._budgets.setdefault(key, self._budget(key))
+        for key in keys:
+            def on_sample(sample: Any, budget: Budget = self._budgets[key]) -> None:
+                name = str(sample.key_expr)  # the sample's own key (the subscription's may be a wildcard)
+                size = len(sample.payload)  # checked before the payload is copied out of Zenoh
+                if not self._closed and self._admit(name, size, budget):
+                    self._enqueue_sample(name, sample.payload.to_bytes(), time.time())
 
             self._subscriptions.append(session.declare_subscriber(key, on_sample))
 
@@ -261,6 +344,8 @@ class SessionRecorder:
             except queue.Empty:
                 item = None
             if self.io_error is not None:  # the file is broken: drain the queue, keep nothing
+                if item is not None and item[0] == "sample":
+                    self._release(len(item[2]))
                 if item is not None and item[0] == "stop":
                     self._file.close()
                     return
@@ -283,7 +368,10 @@ class SessionRecorder:
                         self._writer.flush()
                         last_flush, dirty = time.monotonic(), False
                 elif item[0] == "sample":
-                    self._write_sample(*item[1:])
+                    try:
+                        self._write_sample(*item[1:])
+                    finally:
+                        self._release(len(item[2]))
                     dirty = True
                 elif item[0] == "metadata":
                     self._writer.add_metadata(item[1], _mcap_metadata(item[2]))
@@ -301,9 +389,17 @@ class SessionRecorder:
 
     def _finish(self, summary: dict[str, Any]) -> None:
         try:
+            with self._pending_lock:
+                dropped = {k: dict(v) for k, v in self.dropped_by_key.items()}
+            if dropped:
+                event(log, "recording closed with dropped samples", logging.WARNING, path=str(self.path),
+                      dropped=self.dropped, by_key=dropped)
             self._writer.add_metadata("closed", _mcap_metadata({
-                "counts": self.counts, "dropped_samples": self.dropped, "errors": self.errors[:20],
-                "ended": time.time(), **summary}))
+                "counts": self.counts, "dropped_samples": self.dropped, "dropped_by_key": dropped,
+                "budgets": {k: {"max_bytes": b.max_bytes, "max_elements": b.max_elements}
+                            for k, b in self._budgets.items()},
+                "max_pending_bytes": self.config.max_pending_bytes, "queue_size": self.config.queue_size,
+                "errors": self.errors[:20], "ended": time.time(), **summary}))
             self._writer.finish()
         finally:
             self._file.close()
@@ -344,8 +440,9 @@ class SessionRecorder:
 
     def _write_sample(self, key: str, payload: bytes, t_received: float) -> None:
         msg: Message | None
+        budget = self._budget(key)
         try:
-            msg = decode(payload)
+            msg = decode(payload, max_bytes=budget.max_bytes, max_elements=budget.max_elements)
         except ObjscanError:
             msg = None  # recorded as it came; a reader will find out
         stamp = float(getattr(msg, "stamp", 0.0) or 0.0) or t_received

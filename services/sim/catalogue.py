@@ -248,7 +248,9 @@ def resolve_object(name_or_path: str) -> tuple[str, Path, bool]:
         raise SimObjectError("object name is empty", code="object_not_found")
     path = Path(text).expanduser()
     root = hope_root()
-    if path.suffix.lower() not in MESH_SUFFIXES and not path.is_dir() and (root / text).is_dir():
+    # a bare name is a HOPE name first (a folder of that name where the process runs does not shadow it)
+    bare = len(path.parts) == 1 and text not in (".", "..")
+    if path.suffix.lower() not in MESH_SUFFIXES and (bare or not path.is_dir()) and (root / text).is_dir():
         mesh = _mesh_in_folder(root / text)
         if mesh is None:
             raise SimObjectError(f"HOPE object {text!r} has no mesh in {root / text}", code="object_not_found")

@@ -7,7 +7,9 @@
 - ``sim/gripper`` (``GripperRequest``) → ``GripperResult``: closing at the current TCP grasps (or not, and
   why); opening sets a held object down with the profile's errors.
 - ``sim/world`` (``Request``, ``params.op``): ``state``, ``reset`` (object, profile, seed), ``force_slip``,
-  ``turn`` (by hand), ``gt_points`` (ground-truth surface samples in ``base``). Ground truth only.
+  ``turn`` (by hand), ``gt_points`` (ground-truth surface samples in ``base``). Ground truth only. A reset
+  loads its object only from the twin's configured roots (``object_roots.py``): one ``object_not_found``
+  answer for a path outside them and for one that is not there.
 
 The world survives the twin: every change is written to a state file before the reply goes out (joint
 set-points, which stream at up to 100 Hz, at most ``JOINTS_SAVE_DELAY_S`` later, and always before the
@@ -29,6 +31,7 @@ from common.errors import InvalidRequest
 from common.log import event
 from common.messages import D435_COLOR_SIZES, JointState, Ok, Request, RGBDFrame, d435_intrinsics
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from services.sim.object_roots import ObjectRoots
 from services.sim.state_file import StateFile, resolve_state_path
 from services.sim.world import World, default_object_pose
 
@@ -46,6 +49,7 @@ class SimService(Service):
         z = self.settings.zenoh
         path = resolve_state_path(opts.get("state_file"), self.robot, list(z.connect), list(z.listen))
         self.state_file = StateFile(path) if path is not None else None
+        self.object_roots = ObjectRoots.configured(opts.get("object"), opts.get("object_dirs") or ())
         self.restored = False
         self.state_error = ""
         self._joints_dirty = False
@@ -116,7 +120,11 @@ class SimService(Service):
         if op == "reset":
             async with self._world_lock:
                 w = self.world
-                obj = params.get("object", w.obj.name)
+                current = (w.obj.name, None if w.obj.source is None else str(w.obj.source))
+                requested = params.get("object", w.obj.name)
+                checked = self.object_roots.check(requested, current)
+                # the object the world holds is reused as it is (a mesh given by path has only a stem as name)
+                obj = w.obj.copy() if checked in current else checked
                 profile = params.get("profile", w.profile.name)
                 seed = int(params.get("seed", w.seed))
                 physics = str(params.get("physics", w.physics))
@@ -221,6 +229,10 @@ def _number(params: dict, name: str, default: float, lo: float, hi: float) -> fl
 def main() -> None:
     p = service_arg_parser("objscan digital twin (simulated table, object, arm, gripper and D435)")
     p.add_argument("--object", default="milk", help="HOPE object name or a mesh path (default: %(default)s)")
+    p.add_argument("--object-dir", action="append", default=[], metavar="DIR",
+                   help="a folder whose meshes a reset request may name (repeatable; also "
+                        "$OBJSCAN_SIM_OBJECT_DIRS). Besides these, only HOPE objects, the --object given "
+                        "here and the world's current object can be loaded")
     p.add_argument("--profile", default="ideal", help="error profile: ideal | hand-turned | realistic | robot-turned")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--physics", default="geometric", choices=["geometric", "mujoco"],
@@ -231,7 +243,8 @@ def main() -> None:
     p.add_argument("--fresh", action="store_true",
                    help="ignore a saved world and start from --object/--profile/--seed (overwrites the file)")
     args = p.parse_args()
-    run_service(lambda: SimService(settings_from_args(args, object=args.object, profile=args.profile,
+    run_service(lambda: SimService(settings_from_args(args, object=args.object, object_dirs=args.object_dir,
+                                                      profile=args.profile,
                                                       seed=args.seed, physics=args.physics,
                                                       state_file=args.state_file,
                                                       fresh=args.fresh)))

@@ -76,7 +76,7 @@ def test_real_cell_merged():
                                                       "orchestrator"}
     cam, arm = s["camera"], s["arm"]
     assert cam["command"][cam["command"].index("--backend") + 1] == "realsense"
-    assert "/dev/bus/usb:/dev/bus/usb" in cam["devices"]
+    assert not cam.get("devices")  # USB through the Intel-only folder (test_compose_least_privilege.py)
     assert arm["command"][arm["command"].index("--backend") + 1] == "dynamixel"
     port = arm["command"][arm["command"].index("--port") + 1]
     assert arm["devices"] == [f"{REAL_ENV['OBJSCAN_DYNAMIXEL_DEVICE']}:{port}"]
@@ -87,7 +87,7 @@ def test_real_cell_merged():
     assert arm["environment"]["OBJSCAN_ROBOT_CONFIG"] == mount["target"]
     for svc in (cam, arm):  # a missing device stops after a few tries instead of restart-looping
         assert svc["restart"].startswith("on-failure")
-        assert {"/data/sessions", "/data/models"} <= {compose._volume_target(v) for v in svc["volumes"]}
+        assert not {"/data/sessions", "/data/models"} & {compose._volume_target(v) for v in svc["volumes"]}
     # sessions are inside the volume: the orchestrator's root is the mounted folder
     orch = s["orchestrator"]["command"]
     assert orch[orch.index("--sessions") + 1] == "/data/sessions"

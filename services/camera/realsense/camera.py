@@ -283,6 +283,15 @@ class RealSenseCamera(Camera):
                 raise CaptureTimeout(f"no frame from the RealSense camera within {self.config.timeout_ms} ms",
                                      detail={"timeout_ms": self.config.timeout_ms})
 
+    def skip_frame(self) -> None:
+        """Read past one capture's framesets without filtering, aligning or copying them: a recording read one
+        frame in N (``objscan import --every``) pays only for the frames it keeps. ``EndOfReplay`` at the end
+        of a playback, like ``capture``; the skipped frame takes no sequence number."""
+        with self._lock:
+            self._before_capture(None)
+            for _ in range(self.config.frames_per_capture):
+                self._wait_frames(reconnect=False)
+
     def _grab(self, T_base_camera: np.ndarray | None) -> RGBDFrame:
         rs = _rs()
         if self._playback is None:
