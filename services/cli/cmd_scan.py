@@ -205,8 +205,13 @@ def run(args) -> int:  # noqa: ANN001
     orchestrator_args = ["--sessions", str(session_dir.parent)]
     if args.library:
         orchestrator_args += ["--library", str(Path(args.library).resolve())]
+    # a twin started here may load the operator's mesh path (its object roots are otherwise HOPE and folders)
+    from services.sim.object_roots import start_args
+
+    sim_args = start_args(args.object) if getattr(args, "object", None) else []
     with ensure_cell(args.port, args.backend, session_dir / "logs",
-                     extra_args={"orchestrator": orchestrator_args, **arm_args(args)},
+                     extra_args={"orchestrator": orchestrator_args, **arm_args(args),
+                                 **({"sim": sim_args} if sim_args else {})},
                      keeper_grace=args.cell_grace) as group:
         # a joined cell's orchestrator (objscan up, compose) writes under its own --sessions root: without
         # --out, name the session and let it place it there (a local absolute path would be refused)

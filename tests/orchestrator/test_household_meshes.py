@@ -46,8 +46,7 @@ def household_mesh(kind: str) -> o3d.geometry.TriangleMesh:
 
 def scan_mesh(path: Path, out: Path, views: int = 3, timeout: float = 1700) -> dict:
     """Run ``objscan scan --object PATH`` (own cell, MuJoCo physics) and return its journal."""
-    # the twin loads a mesh only from its object folders (services/sim/object_roots.py)
-    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(REPO), OBJSCAN_SIM_OBJECT_DIRS=str(path.parent))
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(REPO))
     proc = subprocess.run([sys.executable, "-m", "services.cli.main", "scan", "--object", str(path), "--views",
                            str(views), "--physics", "mujoco", "--out", str(out), "--port", str(free_port()),
                            "--no-record", "--json"], cwd=REPO, env=env, capture_output=True, text=True,

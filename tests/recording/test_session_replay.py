@@ -116,6 +116,7 @@ def test_recorded_frames_are_the_saved_frames(recorded):
 def test_recorded_payloads_are_what_the_codec_sends(recorded):
     """Re-encoding a decoded payload gives the same bytes: the recorded bytes are the wire bytes."""
     from common.codec import decode
+    from services.registration import pair_wire  # noqa: F401  registers the pair jobs' messages the run sent
 
     rec = read_recording(recorded)
     for ex in rec.exchanges:
