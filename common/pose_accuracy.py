@@ -69,6 +69,6 @@ def session_pose_accuracy(session_data: dict[str, Any]) -> tuple[PoseAccuracy, s
     """The accuracy a stored session states (top level of ``session.json``, else its acquisition
     ``config``), and where it came from (``"session"`` or ``"default"``: ``CONSERVATIVE``)."""
     for holder in (session_data, session_data.get("config") or {}):
-        if isinstance(holder, dict) and holder.get(POSE_ACCURACY_KEY) is not None:
+        if isinstance(holder, dict) and holder.get(POSE_ACCURACY_KEY):  # {}: the acquisition stated none
             return PoseAccuracy.from_dict(holder[POSE_ACCURACY_KEY]), "session"
     return CONSERVATIVE, "default"

@@ -16,8 +16,8 @@ import numpy as np
 import open3d as o3d
 
 from common.geometry import transform_points
-from common.open3d_threads import limit_open3d_threads
 from common.messages import RGBDFrame
+from common.open3d_threads import limit_open3d_threads
 from services.registration.cloud import estimate_normals, from_o3d, to_o3d
 
 from . import default_profile, paper_profile
