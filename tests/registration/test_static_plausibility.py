@@ -43,3 +43,44 @@ def test_a_session_states_its_accuracy_or_gets_the_conservative_default():
     assert exc.value.code == "bad_pose_accuracy"
     with pytest.raises(PoseAccuracyError):
         PoseAccuracy.from_dict({"position_sigma_mm": 1.0})
+
+
+def test_papras_states_its_accuracy_and_a_bad_entry_names_the_key(tmp_path):
+    from services.arm.drivers.dynamixel.robot_file import DEFAULT_ROBOT_CONFIG, read_robot_file, robot_pose_accuracy
+    from services.arm.errors import RobotConfigError
+
+    assert robot_pose_accuracy() == PoseAccuracy(3.0, 1.0)
+    text = DEFAULT_ROBOT_CONFIG.read_text()
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(text.replace("orientation_sigma_deg: 1.0", "orientation_sigma_deg: -2"))
+    for read in (robot_pose_accuracy, read_robot_file):
+        with pytest.raises(RobotConfigError) as exc:
+            read(bad)
+        assert exc.value.detail["key"] == "pose_accuracy.orientation_sigma_deg"
+    silent = tmp_path / "silent.yaml"
+    silent.write_text("\n".join(line for line in text.splitlines() if not line.startswith("pose_accuracy")))
+    assert robot_pose_accuracy(silent) == CONSERVATIVE
+
+
+def test_the_twins_profiles_state_the_accuracy_of_their_drawn_errors():
+    from services.sim.profiles import get_profile
+
+    ideal, realistic, robot = (get_profile(n).pose_accuracy() for n in ("ideal", "realistic", "robot-turned"))
+    assert ideal == PoseAccuracy(0.0, 0.0)
+    # realistic: per-scan 1-3 mm / 0.3-1 deg (RMS 2.08 mm / 0.68 deg), hand-eye 3 mm / 0.5 deg, joint jitter
+    assert 3.5 < realistic.position_sigma_mm < 4.0 and 0.8 < realistic.orientation_sigma_deg < 0.9
+    assert robot.position_sigma_mm < realistic.position_sigma_mm
+    wider = get_profile("realistic", scan_pose_mm=(5.0, 10.0)).pose_accuracy()
+    assert wider.position_sigma_mm > realistic.position_sigma_mm
+
+
+def test_a_static_request_with_a_malformed_accuracy_is_a_typed_error():
+    from common.api import StaticRequest
+    from common.errors import WireError
+    from common.messages import RGBDFrame
+
+    frame = RGBDFrame(color=np.zeros((4, 4, 3), np.uint8), depth=np.zeros((4, 4), np.uint16), T_base_camera=np.eye(4))
+    StaticRequest(frames=[frame], pose_accuracy={"position_sigma_mm": 3.0, "orientation_sigma_deg": 1.0}).validate()
+    with pytest.raises(WireError) as exc:
+        StaticRequest(frames=[frame], pose_accuracy={"position_sigma_mm": "far"}).validate()
+    assert exc.value.code == "bad_value"
