@@ -73,6 +73,11 @@ class StaticConfig:
     object_score_corr: float = 0.002  # m; correspondence distance of the object fitness
     object_min_gain: float = 0.02  # object fitness the refinement must add to be kept
     object_min_points: int = 300  # table-free points (at object_voxel) below which there is nothing to refine on
+    # the refinement fixes stalls of ~1.5 deg / ~9 mm; a bigger step is ICP sliding along what geometry alone
+    # cannot see (a can turning about its axis: 5 deg / 28 mm on a realistic tomato_sauce pair, with the object
+    # fitness rising) and is not kept, however wide the arm's plausible window
+    object_max_step_m: float = 0.015
+    object_max_step_deg: float = 2.0
 
     # --- verification: when is a result trusted ----------------------------------------------------------
     check_voxel: float = 0.003  # m; the clouds a result is checked on

@@ -18,7 +18,7 @@ from functools import cached_property
 import numpy as np
 import open3d as o3d
 
-from common.geometry import invert, transform_points
+from common.geometry import invert, transform_error, transform_points
 from common.messages import RGBDFrame
 from services.registration.cloud import downsample, to_o3d
 
@@ -170,7 +170,9 @@ def refine_on_object(src: PriorScan, tgt: PriorScan, T: np.ndarray, prior: np.nd
     for corr in cfg.object_corr:
         refined = pw.icp_point_to_plane(src.object, tgt.object, corr, refined, cfg.object_iterations).T
     after = pw.evaluate(src.object, tgt.object, refined, cfg.object_score_corr).fitness
-    if after < before + cfg.object_min_gain or not plausible(refined, prior, cfg):
+    step_m, step_deg = transform_error(refined, T)
+    if (after < before + cfg.object_min_gain or not plausible(refined, prior, cfg)
+            or step_m > cfg.object_max_step_m or step_deg > cfg.object_max_step_deg):
         return None
     return refined
 
