@@ -45,13 +45,21 @@ def _views(name: str, n: int, seed: int, profile: str = PROFILE):
     return simulated_views(name, views=n, scans_per_view=3, profile=profile, seed=seed)
 
 
+def _config(profile: str = PROFILE) -> StaticConfig:
+    """The default profile with the arm's accuracy the twin's error profile states (as an acquisition sends it)."""
+    from services.sim.profiles import get_profile
+
+    return StaticConfig().with_accuracy(get_profile(profile).pose_accuracy())
+
+
 def _measure(frames, cfg: StaticConfig) -> dict[str, Any]:
     t, c = time.perf_counter(), time.process_time()
     try:
         result = register_view(frames, cfg)
     except StaticRegistrationError as exc:
         return {"s": time.perf_counter() - t, "cpu_s": time.process_time() - c, "error": exc.code}
-    out = {"s": time.perf_counter() - t, "cpu_s": time.process_time() - c, "paths": [s.path for s in result.scans[1:]]}
+    out = {"s": time.perf_counter() - t, "cpu_s": time.process_time() - c, "paths": [s.path for s in result.scans[1:]],
+           "left_out": sum(not s.fused for s in result.scans)}
     errs = relative_pose_errors(result, frames)
     out["trans_mm"] = max(e[0] for e in errs)
     out["rot_deg"] = max(e[1] for e in errs)
@@ -83,6 +91,7 @@ def _summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "views_failed": len(rows) - len(ok),
         "failure_codes": sorted({r["error"] for r in rows if "error" in r}),
         "global_fallbacks": sum(p == "global" for r in ok for p in r.get("paths", [])),
+        "scans_left_out": sum(r.get("left_out", 0) for r in ok),  # not fused: failed check or implausible
         "global_fallback_fraction": round(sum(p == "global" for r in ok for p in r.get("paths", []))
                                           / max(1, sum(len(r.get("paths", [])) for r in ok)), 3),
     }
@@ -103,7 +112,7 @@ def run(quick: bool = False) -> dict[str, Any]:
             pe = prior_pose_errors(frames)
             prior_t.append(max(e[0] for e in pe))
             prior_r.append(max(e[1] for e in pe))
-            d = _measure(frames, StaticConfig())
+            d = _measure(frames, _config())
             rows["default"].append(d)
             entry = per_object.setdefault(name, {})
             _worst(entry, "default", d)
@@ -112,7 +121,7 @@ def run(quick: bool = False) -> dict[str, Any]:
                 rows["paper"].append(p)
                 _worst(entry, "paper", p)
         for frames in _views(name, n_views, seed=10 + k, profile=BASELINE_PROFILE):
-            rows["baseline"].append(_measure(frames, StaticConfig()))
+            rows["baseline"].append(_measure(frames, _config(BASELINE_PROFILE)))
     default, paper = _summarise(rows["default"]), _summarise(rows["paper"])
     baseline = _summarise(rows["baseline"])
     return {

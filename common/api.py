@@ -13,6 +13,7 @@ import numpy as np
 from common.codec import Message, array_field
 from common.errors import WireError
 from common.messages import Grasp, Plane, PointCloud, RGBDFrame
+from common.pose_accuracy import PoseAccuracy, PoseAccuracyError
 
 
 @dataclass(kw_only=True)
@@ -107,10 +108,18 @@ class StaticRequest(Message):
     frames: list[RGBDFrame] = field(default_factory=list)
     profile: str = "default"
     view: int = 0
+    # the arm's camera pose accuracy ({"position_sigma_mm", "orientation_sigma_deg"}, common/pose_accuracy.py):
+    # a scan correction beyond what it explains is not fused; empty: the registration's conservative default
+    pose_accuracy: dict = field(default_factory=dict)
 
     def validate(self) -> None:
         if not self.frames:
             raise WireError("a static registration needs at least one frame", code="empty")
+        if self.pose_accuracy:
+            try:
+                PoseAccuracy.from_dict(self.pose_accuracy)
+            except PoseAccuracyError as exc:
+                raise WireError(exc.message, code="bad_value", detail=exc.detail) from exc
 
 
 @dataclass(kw_only=True)

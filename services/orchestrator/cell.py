@@ -166,8 +166,10 @@ class Cell:
         raise ObjscanError(f"the camera could not stamp a pose in {POSE_ATTEMPTS} captures (pose_source=unknown)",
                            code="no_camera_pose")
 
-    async def register_static(self, frames: list[RGBDFrame], view: int, profile: str) -> ViewResult:
-        reply = await self._request(keys.REGISTRATION_STATIC, StaticRequest(frames=frames, profile=profile, view=view),
+    async def register_static(self, frames: list[RGBDFrame], view: int, profile: str,
+                              pose_accuracy: dict | None = None) -> ViewResult:
+        request = StaticRequest(frames=frames, profile=profile, view=view, pose_accuracy=dict(pose_accuracy or {}))
+        reply = await self._request(keys.REGISTRATION_STATIC, request,
                                     timeout=COMPUTE_TIMEOUT_S)
         return _expect(reply, ViewResult)
 

@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 from common.errors import InvalidRequest
+from common.pose_accuracy import PoseAccuracy, PoseAccuracyError
 
 
 class ConfigError(InvalidRequest):
@@ -165,6 +166,10 @@ class AcquisitionConfig:
     dynamic_config: dict = field(default_factory=dict)
     max_grasp_attempts: int = 16  # executions tried per turn before re-scanning (dry-run failures do not count)
     max_rescans: int = 2  # re-scans per view before the session ends with a reason
+    # the arm's camera pose accuracy {"position_sigma_mm", "orientation_sigma_deg"} sent with every static
+    # registration (a scan correction it cannot explain is not fused) and stored in session.json; empty: the
+    # cell states it at start (the twin from its error profile, a real arm from its robot configuration)
+    pose_accuracy: dict = field(default_factory=dict)
     force_first_slip: bool = False  # sim: the first grasp slips (recovery test)
     # a view whose object height differs from the previous one's by more than max(m, rel * height) means the
     # object toppled at the set-down: the views restart from where it lies, at most this many times
@@ -193,6 +198,13 @@ class AcquisitionConfig:
             raise _fail("dynamic_config", "must be a map", self.dynamic_config)
         _number("max_grasp_attempts", self.max_grasp_attempts, 1, 1000, integer=True)
         _number("max_rescans", self.max_rescans, 0, 100, integer=True)
+        if not isinstance(self.pose_accuracy, dict):
+            raise _fail("pose_accuracy", "must be a map", self.pose_accuracy)
+        if self.pose_accuracy:
+            try:
+                PoseAccuracy.from_dict(self.pose_accuracy)
+            except PoseAccuracyError as exc:
+                raise _fail("pose_accuracy", exc.message, self.pose_accuracy) from exc
         _flag("force_first_slip", self.force_first_slip)
         _flag("evaluate", self.evaluate)
         x, y = _numbers("workspace_center", self.workspace_center, -2.0, 2.0, length=2)

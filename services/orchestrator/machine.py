@@ -26,6 +26,7 @@ from __future__ import annotations
 import asyncio
 import errno
 import logging
+import os
 import shutil
 import time
 from collections.abc import Callable
@@ -39,7 +40,9 @@ from common.api import GraspPlanReply, ViewResult
 from common.errors import ObjscanError, RemoteError
 from common.log import event
 from common.messages import Grasp
+from common.pose_accuracy import PoseAccuracy
 from common.session_folder import scan_dir, view_dir
+from services.arm.drivers.dynamixel.robot_file import robot_pose_accuracy
 from services.orchestrator.cell import Cell
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.incremental import IncrementalModel
@@ -258,17 +261,28 @@ class Acquisition:
         if self.j.simulated is None:
             try:
                 x, y = self.config.workspace_center
-                await self.cell.sim("reset", object=self.config.object, profile=self.config.profile,
-                                    seed=self.config.seed, x=float(x), y=float(y), physics=self.config.physics)
+                state = await self.cell.sim("reset", object=self.config.object, profile=self.config.profile,
+                                            seed=self.config.seed, x=float(x), y=float(y),
+                                            physics=self.config.physics)
                 self.j.simulated = True
+                self._state_pose_accuracy(state.get("pose_accuracy"))
                 if self.config.force_first_slip:
                     await self.cell.sim("force_slip")
             except ObjscanError as exc:
                 if exc.code not in ("unavailable", "timeout"):
                     raise
                 self.j.simulated = False
-            self.decide("cell ready", simulated=self.j.simulated)
+                self._state_pose_accuracy(robot_pose_accuracy(os.environ.get("OBJSCAN_ROBOT_CONFIG")).to_dict())
+            self.decide("cell ready", simulated=self.j.simulated, pose_accuracy=self.config.pose_accuracy)
         await self.cell.gripper(0.1, self.config.turn.gripper_force)
+
+    def _state_pose_accuracy(self, accuracy: dict | None) -> None:
+        """Record the arm's camera pose accuracy the cell states (unless the run's config gave one): every
+        static registration gets it, and session.json keeps it for ``reconstruct``."""
+        if self.config.pose_accuracy or not accuracy:
+            return
+        self.config.pose_accuracy = PoseAccuracy.from_dict(accuracy).to_dict()
+        self.j.config["pose_accuracy"] = self.config.pose_accuracy
 
     async def _park(self) -> None:
         """Arm home with the gripper open: the safe state after a failure."""
@@ -291,7 +305,8 @@ class Acquisition:
         from common.session_folder import write_scan
 
         write_scan(self.store.path / "locate", 0, 0, frame)
-        result = await self.cell.register_static([frame], view=-1, profile=self.config.static_profile)
+        result = await self.cell.register_static([frame], view=-1, profile=self.config.static_profile,
+                                                 pose_accuracy=self.config.pose_accuracy)
         self._remember_object(-1, result)
         self.decide("located", center=np.round(result.center, 4).tolist(), height=round(result.height, 4))
         return State.SCAN
@@ -357,10 +372,19 @@ class Acquisition:
             frames = [self.store.load_scan(k, j) for j in range(SCANS_PER_VIEW)]
             try:
                 async with self.incremental.foreground():  # no speculative pair job meanwhile
-                    result = await self.cell.register_static(frames, view=k, profile=self.config.static_profile)
+                    result = await self.cell.register_static(frames, view=k, profile=self.config.static_profile,
+                                                             pose_accuracy=self.config.pose_accuracy)
             except RemoteError as exc:
                 self.decide("static registration failed", code=exc.code, message=exc.message)
                 return await self._rescan(k, f"registration failed: {exc.code}")
+            left_out = result.figures.get("scans_left_out") or []
+            if left_out:  # a scan failed its check or its correction is beyond the arm's accuracy: not fused
+                which = ", ".join(f"scan {e['index']} ({e['reason']})" for e in left_out)
+                if int(self.j.rescans.get(str(k), 0)) < self.config.max_rescans:
+                    self.decide("scans not fused: taking the view again", view=k, left_out=left_out)
+                    return await self._rescan(k, f"not fused: {which}")
+                self.decide("view kept without the scans that could not be fused (re-scans used up)", view=k,
+                            left_out=left_out)
             reason = (topple_reason(self.j.heights.get(str(k - 1)), float(result.height),
                                     self.config.topple_height_tol_m, self.config.topple_height_rel, k)
                       if k > 0 else None)

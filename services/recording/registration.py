@@ -25,6 +25,7 @@ from common import keys
 from common.api import DynamicRequest, ModelResult, StaticRequest, ViewResult
 from common.atomic import atomic_write_bytes
 from common.messages import PointCloud, RGBDFrame
+from common.pose_accuracy import PoseAccuracy, session_pose_accuracy
 from common.session_folder import read_scan, read_session, write_scan
 from services.recording.compare import compare_models
 from services.recording.errors import RecordingError
@@ -45,17 +46,20 @@ class RegistrationInputs:
     recorded_model: PointCloud | None
     source: str
     extra: dict[str, Any] = field(default_factory=dict)
+    pose_accuracy: dict[str, Any] = field(default_factory=dict)  # the arm's, as the run sent it ({}: not stated)
 
 
 def inputs_from_recording(source: str | Path) -> RegistrationInputs:
     rec = read_recording(source)
     views: dict[int, list[RGBDFrame]] = {}
     profile = "default"
+    accuracy: dict[str, Any] = {}
     for ex in rec.exchanges_on(keys.REGISTRATION_STATIC):
         req, reply = ex.request_message(), ex.reply_message()
         if isinstance(req, StaticRequest) and isinstance(reply, ViewResult) and req.view >= 0:
             views[req.view] = list(req.frames)  # a re-scan's request comes later and replaces it
             profile = req.profile
+            accuracy = dict(req.pose_accuracy)
     if not views:
         raise RecordingError(f"{rec.paths[0]} records no successful static registration", detail={
             "paths": [str(p) for p in rec.paths]})
@@ -76,7 +80,7 @@ def inputs_from_recording(source: str | Path) -> RegistrationInputs:
         dyn_config = dict(cfg.get("dynamic_config", {}))
     return RegistrationInputs(views=views, static_profile=profile, turns_deg=turns, dynamic_config=dyn_config,
                               recorded_model=model, source=str(rec.paths[0]),
-                              extra={"truncated": [str(p) for p in rec.truncated]})
+                              extra={"truncated": [str(p) for p in rec.truncated]}, pose_accuracy=accuracy)
 
 
 def inputs_from_folder(session_dir: str | Path) -> RegistrationInputs:
@@ -90,11 +94,12 @@ def inputs_from_folder(session_dir: str | Path) -> RegistrationInputs:
     if not views:
         raise RecordingError(f"{session_dir} has no complete scan to register")
     model_path = info.path / "model.ply"
+    accuracy, stated = session_pose_accuracy(info.data)
     return RegistrationInputs(views=views, static_profile=str(cfg.get("static_profile", "default")),
                               turns_deg={k: info.commanded_turn_deg(k) for k in views},
                               dynamic_config=dict(cfg.get("dynamic_config", {})),
                               recorded_model=read_ply(model_path) if model_path.is_file() else None,
-                              source=str(info.path))
+                              source=str(info.path), pose_accuracy=accuracy.to_dict() if stated == "session" else {})
 
 
 def registration_inputs(source: str | Path) -> RegistrationInputs:
@@ -137,12 +142,14 @@ def replay_registration(source: str | Path, out_dir: str | Path, *, static_profi
         frames = inputs.views[k]
         for j, frame in enumerate(frames):
             write_scan(out, k, j, frame)
-        result = register_view(frames, StaticConfig.for_profile(profile))
+        accuracy = PoseAccuracy.from_dict(inputs.pose_accuracy) if inputs.pose_accuracy else None
+        result = register_view(frames, StaticConfig.for_profile(profile).with_accuracy(accuracy))
         store.save_view(view_result_message(k, result))
         timings[f"static_view_{k:02d}"] = round(time.perf_counter() - t, 3)
         say(f"view {k}: {len(result.object_cloud)} object points in {timings[f'static_view_{k:02d}']:.1f} s")
     turns = [float(inputs.turns_deg.get(k, 0.0)) for k in order]
-    store.write_session_info({"static_profile": profile, "dynamic_config": dyn, "replay_of": inputs.source},
+    store.write_session_info({"static_profile": profile, "dynamic_config": dyn, "replay_of": inputs.source,
+                              "pose_accuracy": inputs.pose_accuracy},
                              len(order), turns)
     report: dict[str, Any] = {"source": inputs.source, "static_profile": profile, "dynamic_config": dyn,
                               "views": order, "turns_deg": turns}

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from common.errors import ObjscanError
+from common.pose_accuracy import session_pose_accuracy
 from common.session_folder import atomic_write_json, read_scan, read_session
 from services.registration.cloud import write_ply
 from services.registration.dynamic.model import DynamicConfig, MapPairs, build_model
@@ -56,8 +57,11 @@ def reconstruct(
     stage's defaults. Returns the report (also written as JSON). Raises
     ``SessionFolderError`` only when the session itself is unreadable; per-view failures are in the report.
     """
-    cfg = config or StaticConfig()
     session = read_session(Path(session_dir))
+    # the arm's pose accuracy the session states (else the conservative default): no scan correction beyond it
+    # is fused
+    accuracy, accuracy_source = session_pose_accuracy(session.data)
+    cfg = (config or StaticConfig()).with_accuracy(accuracy if accuracy_source == "session" else None)
     out = Path(out_dir)
     (out / "views").mkdir(parents=True, exist_ok=True)
     t_start, cpu_start = time.perf_counter(), time.process_time()
@@ -87,6 +91,7 @@ def reconstruct(
             "object": session.data.get("object"),
             "profile": cfg.profile,
             "config": cfg.as_dict(),
+            "pose_accuracy": {**cfg.accuracy.to_dict(), "source": accuracy_source},
             "workers": n_workers,
             "threads": n_threads,
             "views": views_report,
@@ -252,6 +257,9 @@ def _summary(views: list[dict[str, Any]], total_s: float, cpu_s: float) -> dict[
         "stage_s_per_view": round(total_s / len(views), 4) if views else 0.0,
         "cpu_s": round(cpu_s, 3),
         "paths": sorted({s["path"] for v in ok for s in v["scans"]}),
+        # scans not fused (failed their check, or a correction beyond the arm's accuracy), per view
+        "scans_left_out": {str(v["index"]): [e["index"] for e in v["scans_left_out"]]
+                           for v in ok if v.get("scans_left_out")},
     }
     if gts:
         s["max_trans_err_mm"] = max(g["max_trans_err_mm"] for g in gts)

@@ -19,6 +19,7 @@ from common import keys
 from common.api import StaticRequest, ViewResult
 from common.codec import Message
 from common.errors import InvalidRequest
+from common.pose_accuracy import PoseAccuracy
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
 from services.registration.dynamic_face import build_model_distributed, register_pair_distributed
 
@@ -58,7 +59,8 @@ class RegistrationService(Service):
     async def static(self, msg: Message | None, ctx: QueryContext) -> ViewResult:
         if not isinstance(msg, StaticRequest):
             raise InvalidRequest("expected a StaticRequest", detail={"got": type(msg).__name__})
-        config = StaticConfig.for_profile(msg.profile)
+        accuracy = PoseAccuracy.from_dict(msg.pose_accuracy) if msg.pose_accuracy else None
+        config = StaticConfig.for_profile(msg.profile).with_accuracy(accuracy)
         result = await self.run_cpu(register_view, msg.frames, config)
         self.jobs_done["static"] += 1
         return view_result_message(msg.view, result)

@@ -28,6 +28,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 import numpy as np
 
 from common.geometry import make_transform
+from common.pose_accuracy import PoseAccuracy
 from services.sim.errors import SimInputError
 from services.sim.sensor_model import D435Noise
 
@@ -80,6 +81,21 @@ class ErrorProfile:
         for name in _RANGES:
             d[name] = list(getattr(self, name))
         return d
+
+    def pose_accuracy(self) -> PoseAccuracy:
+        """The camera pose accuracy this profile's drawn errors amount to (one sigma of one camera pose), the
+        twin's counterpart of a robot configuration's ``pose_accuracy``: the root mean square of the per-scan
+        error sizes (uniform in their ranges), of the joint jitter (3 axes of ``sqrt(2) x joint_noise``, over the
+        lever arm for position) and of the hand-eye error, added in quadrature."""
+        def rms_uniform(lo_hi: tuple[float, float]) -> float:
+            lo, hi = lo_hi
+            return float(np.sqrt((lo * lo + lo * hi + hi * hi) / 3.0))
+
+        jitter_deg = np.sqrt(3.0) * np.sqrt(2.0) * self.joint_noise_deg
+        jitter_mm = np.radians(jitter_deg) * self.joint_lever_m * 1e3
+        mm = np.sqrt(rms_uniform(self.scan_pose_mm) ** 2 + jitter_mm**2 + self.hand_eye_mm**2)
+        deg = np.sqrt(rms_uniform(self.scan_pose_deg) ** 2 + jitter_deg**2 + self.hand_eye_deg**2)
+        return PoseAccuracy(position_sigma_mm=round(float(mm), 3), orientation_sigma_deg=round(float(deg), 4))
 
     # -- draws ----------------------------------------------------------------------------------------
     def draw_hand_eye_error(self, rng: np.random.Generator) -> np.ndarray:

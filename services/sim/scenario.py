@@ -30,7 +30,7 @@ from common.session_folder import write_scan
 from common.session_folder import write_session as write_session_json
 from services.sim.catalogue import load_object
 from services.sim.errors import SimInputError
-from services.sim.profiles import ErrorProfile, get_profile, hand_turn
+from services.sim.profiles import PROFILES, ErrorProfile, get_profile, hand_turn
 from services.sim.world import World, default_object_pose
 
 
@@ -178,6 +178,8 @@ def write_session(directory: str | Path, views: list[list[RGBDFrame]], *, extra:
         })
     data = {"object": first.get("object"), "profile": first.get("profile"), "seed": first.get("seed"),
             "source": "sim", "views": entries, "ground_truth": {"object_model": first.get("object_model")}}
+    if isinstance(first.get("profile"), str) and first["profile"] in PROFILES:  # what the twin's arm states
+        data["pose_accuracy"] = PROFILES[first["profile"]].pose_accuracy().to_dict()
     if extra:
         data.update(extra)
     write_session_json(session, data)

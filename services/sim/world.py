@@ -391,6 +391,7 @@ class World:
                 "object": self.obj.name,
                 "object_model": self.object_model(),
                 "profile": self.profile.name,
+                "pose_accuracy": self.profile.pose_accuracy().to_dict(),  # what the twin's arm states
                 "physics": self.physics,
                 "seed": self.seed,
                 "attached": self.attached,
@@ -426,6 +427,7 @@ class World:
                 "format": SNAPSHOT_FORMAT,
                 "object_model": self.object_model(),
                 "profile": self.profile.name,
+                "pose_accuracy": self.profile.pose_accuracy().to_dict(),  # what the twin's arm states
                 "physics": self.physics,
                 "pad_state": None if self._pad_state is None else list(self._pad_state),
                 "seed": self.seed,

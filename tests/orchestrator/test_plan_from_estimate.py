@@ -32,7 +32,7 @@ class EstimatingCell:
                          intrinsics=Intrinsics(width=4, height=4, fx=3.0, fy=3.0, cx=2.0, cy=2.0),
                          T_base_camera=np.eye(4))
 
-    async def register_static(self, frames, view, profile):  # noqa: ANN001
+    async def register_static(self, frames, view, profile, pose_accuracy=None):  # noqa: ANN001
         xyz = np.zeros((10, 3), np.float32)
         return ViewResult(view=view, cloud=PointCloud(xyz=xyz, normals=np.tile([0, 0, 1], (10, 1)).astype(np.float32)),
                           table=Plane(normal=np.array([0.0, 0.0, 1.0]), offset=0.0, center=np.zeros(3)),

@@ -22,7 +22,7 @@ class RegisterOnlyCell:
     def __init__(self, height: float):
         self.height = height
 
-    async def register_static(self, frames, view, profile):  # noqa: ANN001
+    async def register_static(self, frames, view, profile, pose_accuracy=None):  # noqa: ANN001
         xyz = np.random.default_rng(0).uniform(-0.03, 0.03, (500, 3)).astype(np.float32)
         return ViewResult(view=view, cloud=PointCloud(xyz=xyz, normals=np.tile([0, 0, 1], (500, 1)).astype(np.float32)),
                           table=Plane(normal=np.array([0.0, 0.0, 1.0]), offset=0.0, center=np.zeros(3)),

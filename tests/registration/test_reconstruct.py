@@ -103,3 +103,16 @@ def test_threaded_static_stage_gives_the_serial_poses(session, tmp_path):
         a = read_ply(tmp_path / "serial" / "views" / f"view_{k:02d}.ply")
         b = read_ply(tmp_path / "threaded" / "views" / f"view_{k:02d}.ply")
         assert np.array_equal(a.xyz, b.xyz) and np.array_equal(a.rgb, b.rgb)
+
+
+def test_the_static_stage_takes_the_arm_accuracy_the_session_states(session, report):
+    """The twin's session states its profile's accuracy; reconstruct registers with it and says so."""
+    from services.sim.profiles import get_profile
+
+    _, rep, _ = report
+    stated = json.loads((session / "session.json").read_text())["pose_accuracy"]
+    assert stated == get_profile("robot-turned").pose_accuracy().to_dict()
+    assert rep["pose_accuracy"] == {**stated, "source": "session"}
+    assert rep["config"]["arm_position_sigma_mm"] == stated["position_sigma_mm"]
+    assert rep["summary"]["scans_left_out"] == {}
+    assert all(s["fused"] for v in rep["views"][:2] for s in v["scans"])

@@ -143,18 +143,37 @@ def test_object_height_matches_the_mesh():
     assert abs(result.object_height - world.obj.height) < 0.004
 
 
-@pytest.mark.slow  # 15-40 s: three seeded RANSAC runs on the fallback path
-def test_global_fallback_when_the_arm_pose_is_badly_wrong():
+def _badly_off_view():
     frames, _, _ = labelled_view("milk", seed=5)
     from common.geometry import make_transform, rotation_about_axis
 
     bump = make_transform(rotation_about_axis([0.3, 0.2, 1.0], np.radians(8.0)), [0.04, -0.03, 0.02])
     frames[1].T_base_camera = frames[1].T_base_camera @ bump  # scan 1's believed pose is 5 cm / 8 degrees off
-    result = register_view(frames, StaticConfig())
-    assert result.scans[1].path == "global"
+    return frames
+
+
+@pytest.mark.slow  # 10-40 s: the local paths fail, then the window search
+def test_fallback_search_recovers_a_pose_error_the_stated_accuracy_allows():
+    """An arm stated to be this inaccurate (10 mm / 2 deg per pose) can be 5 cm / 8 degrees off: the
+    search inside its plausible window finds the pose."""
+    from common.pose_accuracy import PoseAccuracy
+
+    frames = _badly_off_view()
+    result = register_view(frames, StaticConfig().with_accuracy(PoseAccuracy(10.0, 2.0)))
+    assert result.scans[1].path == "global" and result.scans[1].fused
     (dt1, dr1), (dt2, dr2) = relative_pose_errors(result, frames)
     assert dt1 <= 1.0 and dr1 <= 0.2, (dt1, dr1)
     assert dt2 <= 1.0 and dr2 <= 0.2, (dt2, dr2)
+
+
+@pytest.mark.slow  # 10-40 s: the local paths fail, then the window search
+def test_a_pose_error_beyond_the_stated_accuracy_leaves_the_scan_out():
+    """The same 5 cm / 8 degrees from an arm stated at the conservative 4 mm / 1 deg: beyond 5 sigma, so the
+    scan is not fused (however well its true pose would fit) and the view says why."""
+    result = register_view(_badly_off_view(), StaticConfig())
+    assert not result.scans[1].fused and result.scans[1].rejected
+    assert result.scans[2].fused
+    assert [e["index"] for e in result.to_json()["scans_left_out"]] == [1]
 
 
 # ------------------------------------------------------------------------------------------ failures

@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, replace
 from typing import Any, Literal
 
+from common.pose_accuracy import CONSERVATIVE, PoseAccuracy
+
 Profile = Literal["default", "paper"]
 
 
@@ -71,19 +73,43 @@ class StaticConfig:
     object_score_corr: float = 0.002  # m; correspondence distance of the object fitness
     object_min_gain: float = 0.02  # object fitness the refinement must add to be kept
     object_min_points: int = 300  # table-free points (at object_voxel) below which there is nothing to refine on
+    # the refinement fixes stalls of ~1.5 deg / ~9 mm; a bigger step is ICP sliding along what geometry alone
+    # cannot see (a can turning about its axis: 5 deg / 28 mm on a realistic tomato_sauce pair, with the object
+    # fitness rising) and is not kept, however wide the arm's plausible window
+    object_max_step_m: float = 0.015
+    object_max_step_deg: float = 2.0
 
     # --- verification: when is a result trusted ----------------------------------------------------------
     check_voxel: float = 0.003  # m; the clouds a result is checked on
     check_corr_factor: float = 2.0  # correspondence distance of the check = factor x check_voxel
     min_fitness: float = 0.3  # fraction of source points with a correspondence
     max_rmse: float = 0.003  # m, inlier RMSE
-    max_correction_m: float = 0.02  # m; the arm's pose is right to a few mm, a bigger jump is suspect
-    max_correction_deg: float = 4.0
 
-    # --- global registration (paper, and the default's fallback) ----------------------------------------
+    # --- plausibility: what the arm's accuracy can explain (plausibility.py) -----------------------------
+    # The arm's camera pose accuracy (one sigma per camera pose: position error size in mm, orientation error
+    # angle in deg), from the robot configuration (``pose_accuracy``) or the session; the default is
+    # ``common.pose_accuracy.CONSERVATIVE``, for sessions that state none. A correction of the arm's relative
+    # pose beyond ``plausible_sigmas`` of what two such poses allow (the orientation error also swings the
+    # baseline between the scans) is rejected however well it fits, and the fallback search never leaves
+    # that window. The floors keep a perfect arm (sigma 0) from rejecting the registration's own noise.
+    arm_position_sigma_mm: float = CONSERVATIVE.position_sigma_mm
+    arm_orientation_sigma_deg: float = CONSERVATIVE.orientation_sigma_deg
+    plausible_sigmas: float = 5.0
+    plausible_floor_mm: float = 5.0
+    plausible_floor_deg: float = 1.0
+
+    # --- global registration (paper) and the default's fallback search ----------------------------------
     global_voxel: float = 0.01  # m; FPFH features at this voxel (radius 5 x voxel)
     global_object_voxel: float = 0.005  # m; the default's fallback matches the table-free object, finer
-    global_attempts: int = 3  # RANSAC runs (seeds) of the default's fallback; the best-scoring wins
+    # The default's fallback (window_search.py) starts ICP on the table-free clouds from a fixed grid inside
+    # the plausible window: yaw about the table normal at these fractions of the rotation bound, tilt about
+    # the two horizontal axes at +-``search_tilt_fraction``, each with the prior's shift and with the shift
+    # that lines up the two objects' centroids (clipped to the window). Deterministic: no random draw.
+    search_yaw_fractions: tuple[float, ...] = (0.0, -0.5, 0.5, -1.0, 1.0)
+    search_tilt_fraction: float = 0.5
+    search_corr: tuple[float, ...] = (0.015, 0.008)  # m; point-to-plane passes of each start, coarse to fine
+    search_iterations: int = 15  # per pass
+    search_refine_top: int = 2  # best candidates (object fitness) given the full refinement and check
     ransac_iterations: int = 100000
     ransac_confidence: float = 0.999
     fpfh_radius_factor: float = 5.0
@@ -148,8 +174,24 @@ class StaticConfig:
             raise ValueError("odometry_seed_iterations must name at least one pyramid level (or be None)")
         if self.object_voxel <= 0 or self.object_score_corr <= 0 or not self.object_corr:
             raise ValueError("object_voxel and object_score_corr must be positive and object_corr non-empty")
+        self.accuracy  # noqa: B018 - validates the two sigmas (a typed error names the key)
+        if not self.plausible_sigmas > 0 or self.plausible_floor_mm < 0 or self.plausible_floor_deg < 0:
+            raise ValueError("plausible_sigmas must be positive and the plausibility floors non-negative")
+        if not self.search_corr or self.search_refine_top < 1:
+            raise ValueError("search_corr must name at least one pass and search_refine_top be at least 1")
         if self.table_height_tolerance <= 0:
             raise ValueError(f"table_height_tolerance must be positive, got {self.table_height_tolerance}")
+
+    def with_accuracy(self, accuracy: PoseAccuracy | None) -> StaticConfig:
+        """This config with the arm's stated pose accuracy (None: unchanged)."""
+        if accuracy is None:
+            return self
+        return replace(self, arm_position_sigma_mm=float(accuracy.position_sigma_mm),
+                       arm_orientation_sigma_deg=float(accuracy.orientation_sigma_deg))
+
+    @property
+    def accuracy(self) -> PoseAccuracy:
+        return PoseAccuracy(self.arm_position_sigma_mm, self.arm_orientation_sigma_deg)
 
     def with_(self, **changes: Any) -> StaticConfig:
         return replace(self, **changes)

@@ -5,8 +5,9 @@ and seed in ``scans``, fusion, table, isolation, per-scan results). How the scan
 profile's own module: ``paper_profile`` (the paper's prior-free pair registration and pose graph) and
 ``default_profile`` (the arm's poses as the prior, RGB-D odometry, checked, with fallbacks).
 
-Both then fuse PC_global at ``output_voxel``, fit the table (RANSAC + least squares, normal toward the
-cameras), and keep the DBSCAN cluster that stands on the table nearest the first scan's centre pixel.
+Both then fuse the verified scans into PC_global at ``output_voxel`` (a scan that failed its check is left
+out, and the view says why), fit the table (RANSAC + least squares, normal toward the cameras), and keep the DBSCAN
+cluster that stands on the table nearest the first scan's centre pixel.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import open3d as o3d
 
 from common.geometry import transform_points
 from common.messages import RGBDFrame
+from common.open3d_threads import limit_open3d_threads
 from services.registration.cloud import estimate_normals, from_o3d, to_o3d
 
 from . import default_profile, paper_profile
@@ -48,6 +50,7 @@ def _scan_results(scans: list[Scan], poses: list[np.ndarray], outcomes: list[Pai
                 )
             )
         else:
+            why = None if oc.verified else (oc.reason or f"unverified: fitness {oc.check.fitness:.2f}")
             out.append(
                 ScanResult(
                     index=s.index,
@@ -59,6 +62,8 @@ def _scan_results(scans: list[Scan], poses: list[np.ndarray], outcomes: list[Pai
                     inlier_rmse=oc.check.rmse,
                     verified=oc.verified,
                     n_points=len(s.pts_cam),
+                    fused=oc.verified,
+                    rejected=why,
                 )
             )
     return out
@@ -73,6 +78,10 @@ def register_view(frames: list[RGBDFrame], config: StaticConfig | None = None) -
     on the table near where the first scan looks).
     """
     cfg = config or StaticConfig()
+    # Open3D's parallel reductions (odometry, ICP) add partial sums in thread-finishing order: bound its threads
+    # to the project's one knob (OMP_NUM_THREADS, 1 when unset) so the same scans give the same poses in any
+    # caller (the services do it at start; ``reconstruct``, ``import`` and library users get it here)
+    limit_open3d_threads()
     sw = Stopwatch()
     frames = list(frames) if isinstance(frames, list | tuple) else frames
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
@@ -87,11 +96,12 @@ def register_view(frames: list[RGBDFrame], config: StaticConfig | None = None) -
             poses, outcomes = default_profile.register(scans, frames, seed_base, cfg, sw)
         scan_results = _scan_results(scans, poses, outcomes)
         with sw("fuse"):
-            xyz = np.concatenate(
-                [transform_points(r.T_base_camera, s.pts_cam.xyz) for r, s in zip(scan_results, scans, strict=True)]
-            )
-            rgb = np.concatenate([s.pts_cam.rgb for s in scans])
-            viewpoint = np.mean([r.T_base_camera[:3, 3] for r in scan_results], axis=0)
+            # a scan that failed its check, or whose correction the arm cannot explain, is never fused: scan 0
+            # (the anchor) always is, so a view left with scan 0 alone is still a view
+            fused = [(r, s) for r, s in zip(scan_results, scans, strict=True) if r.fused]
+            xyz = np.concatenate([transform_points(r.T_base_camera, s.pts_cam.xyz) for r, s in fused])
+            rgb = np.concatenate([s.pts_cam.rgb for _, s in fused])
+            viewpoint = np.mean([r.T_base_camera[:3, 3] for r, _ in fused], axis=0)
             scene = to_o3d(xyz, rgb).voxel_down_sample(cfg.output_voxel)
             scene_xyz = np.asarray(scene.points)
         with sw("table"):

@@ -21,20 +21,24 @@ class ScanResult:
     """One scan's corrected pose and how it was obtained.
 
     ``path`` is ``anchor`` for scan 0 (its believed pose defines the view's frame), else ``local`` (ICP from
-    the arm's pose passed the check), ``global`` (FPFH RANSAC then ICP won) or ``paper`` (paper profile).
-    ``method`` says which step produced it. ``fitness``/``inlier_rmse`` are the pair check against scan 0
-    (default: 3 mm voxel clouds, 6 mm correspondence distance); ``verified`` is whether it passed.
+    the arm's pose passed the check), ``global`` (the default's search inside the plausible window won) or
+    ``paper`` (paper profile). ``method`` says which step produced it. ``fitness``/``inlier_rmse`` are the
+    pair check against scan 0 (default: 3 mm voxel clouds, 6 mm correspondence distance); ``verified`` is
+    whether it passed, ``fused`` whether its points are in the view's cloud (a scan that failed its check or
+    whose correction the arm's accuracy cannot explain never is; ``rejected`` says why).
     """
 
     index: int
     T_base_camera: np.ndarray  # corrected
     T_base_camera_believed: np.ndarray
     path: str
-    method: str  # anchor | rgbd_odometry | icp (either + "+object_icp") | fpfh+icp | paper
+    method: str  # anchor | rgbd_odometry | icp (either + "+object_icp") | window_search+icp | paper
     fitness: float
     inlier_rmse: float
     verified: bool
     n_points: int
+    fused: bool = True
+    rejected: str | None = None  # why the scan was left out of the view (None: fused)
 
     def correction(self) -> tuple[float, float]:
         """(m, deg) between the believed and the corrected pose."""
@@ -46,6 +50,8 @@ class ScanResult:
             "index": self.index,
             "path": self.path,
             "verified": self.verified,
+            "fused": self.fused,
+            **({"rejected": self.rejected} if self.rejected else {}),
             "fitness": round(self.fitness, 4),
             "inlier_rmse_mm": round(self.inlier_rmse * 1e3, 3) if np.isfinite(self.inlier_rmse) else None,
             "correction_mm": round(dt * 1e3, 3),
@@ -62,9 +68,10 @@ class PairOutcome:
 
     T: np.ndarray
     path: str  # "local" | "global" | "paper"
-    method: str  # "rgbd_odometry" | "icp" (either + "+object_icp") | "fpfh+icp" | "paper"
+    method: str  # "rgbd_odometry" | "icp" (either + "+object_icp") | "window_search+icp" | "paper"
     check: PairResult
     verified: bool
+    reason: str | None = None  # why it is not verified (implausible correction, poor fit); None when verified
 
 
 @dataclass
@@ -98,6 +105,7 @@ class StaticViewResult:
             "n_clusters": self.n_clusters,
             "seed_point": None if self.seed_point is None else np.round(self.seed_point, 6).tolist(),
             "scans": [s.to_json() for s in self.scans],
+            "scans_left_out": [{"index": s.index, "reason": s.rejected} for s in self.scans if not s.fused],
             "timings_s": {k: round(v, 4) for k, v in self.timings.items()},
             **self.figures,
         }

@@ -14,6 +14,7 @@ from typing import Any
 
 import yaml
 
+from common.pose_accuracy import CONSERVATIVE, POSE_ACCURACY_KEY, PoseAccuracy, PoseAccuracyError
 from services.arm.drivers.dynamixel.servo_config import GripperServoConfig, JointServoConfig
 from services.arm.errors import RobotConfigError
 
@@ -21,7 +22,7 @@ DEFAULT_ROBOT_CONFIG = Path(__file__).resolve().parents[2] / "robot" / "papras_d
 JOINT_NAMES = tuple(f"robot1/joint{i}" for i in range(1, 7))
 
 TOP_KEYS = {"port", "baudrate", "home", "shutdown", "settle_tolerance", "settle_timeout_s", "max_tracking_error",
-            "profile_velocity_rad_s", "profile_acceleration_rad_s2", "joints", "gripper"}
+            "profile_velocity_rad_s", "profile_acceleration_rad_s2", "joints", "gripper", "pose_accuracy"}
 JOINT_KEYS = {"id": "dxl_id", "model": "model", "offset": "offset_rad", "direction": "direction", "limits": "limits",
               "profile_velocity": "profile_velocity", "profile_acceleration": "profile_acceleration",
               "homing_offset": "homing_offset", "return_delay_time": "return_delay_time"}
@@ -79,6 +80,11 @@ def robot_fields_from_dict(data: Any, source: str = "<dict>") -> dict[str, Any]:
         raise
     except (TypeError, ValueError) as exc:
         raise RobotConfigError(f"{source}: {exc}", detail={"file": source}) from exc
+    if data.get(POSE_ACCURACY_KEY) is not None:  # read by ``robot_pose_accuracy``; validated here as well
+        try:
+            PoseAccuracy.from_dict(data[POSE_ACCURACY_KEY])
+        except PoseAccuracyError as exc:
+            raise RobotConfigError(f"{source}: {exc.message}", detail={**exc.detail, "file": source}) from exc
     fields: dict[str, Any] = {k: data[k] for k in ("port", "baudrate", "shutdown", "settle_tolerance",
                                                     "settle_timeout_s", "max_tracking_error") if k in data}
     if "home" in data:
@@ -88,6 +94,24 @@ def robot_fields_from_dict(data: Any, source: str = "<dict>") -> dict[str, Any]:
     if "profile_acceleration_rad_s2" in data:
         fields["profile_acceleration"] = data["profile_acceleration_rad_s2"]
     return {"joints": joints, "gripper": gripper, **fields}
+
+
+def robot_pose_accuracy(path: str | Path | None = None) -> PoseAccuracy:
+    """The arm's camera pose accuracy the robot configuration states (``pose_accuracy``), or the
+    conservative default when the file states none; a malformed entry is a ``RobotConfigError``."""
+    path = Path(path) if path else DEFAULT_ROBOT_CONFIG
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise RobotConfigError(f"cannot read the robot configuration {path}: {exc}",
+                               detail={"file": str(path)}) from exc
+    entry = _mapping(str(path), data).get(POSE_ACCURACY_KEY)
+    if entry is None:
+        return CONSERVATIVE
+    try:
+        return PoseAccuracy.from_dict(entry)
+    except PoseAccuracyError as exc:
+        raise RobotConfigError(f"{path}: {exc.message}", detail={**exc.detail, "file": str(path)}) from exc
 
 
 def read_robot_file(path: str | Path | None = None, **overrides: Any) -> dict[str, Any]:
