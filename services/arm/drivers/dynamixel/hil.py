@@ -155,8 +155,8 @@ class EmulatedBusDriver(DynamixelArmDriver):
             self.bridge.prepare_gripper(opening_m, force)
         super().set_gripper(opening_m, force)
 
-    def settle(self, q: np.ndarray | None = None) -> np.ndarray:
-        present = super().settle(q)
+    def settle(self, q: np.ndarray | None = None, stop_event: threading.Event | None = None) -> np.ndarray:
+        present = super().settle(q, stop_event)
         self.bridge.flush()
         return present
 
