@@ -96,14 +96,14 @@ class ArmController:
         self.close()
 
     # ------------------------------------------------------------------ e-stop
-    def estop(self) -> None:
+    def estop(self) -> dict:
         """Halt now (from any thread) and refuse motion until ``reset_estop``: the streaming loop stops
         before its next set-point, a settle check ends, and the hold (goal = present on every servo, the
         gripper included unless it holds an object) is written here, not left to the motion thread.
 
         Raises ``DriverError`` (``estop_failed``, naming the servos) when the hold could not be written to
         every servo; the e-stop then stays latched as failed (``estopped`` is False, ``estop_status`` says
-        ``failed``)."""
+        ``failed``). Returns what the hold read, when the driver says (``q``, ``gripper_opening``)."""
         self._estopped = True
         self._stop.set()
         try:
@@ -113,6 +113,7 @@ class ArmController:
             raise DriverError(f"emergency stop NOT confirmed: {exc.message}", code="estop_failed",
                               detail=dict(exc.detail)) from exc
         self._estop_failure = None
+        return dict(getattr(self.driver, "last_hold", None) or {})
 
     def reset_estop(self) -> None:
         """Clear a latched stop (held or failed) and any fault: silent servos are checked again."""

@@ -139,8 +139,11 @@ class ArmService(Service):
         if isinstance(msg, Request) and msg.params.get("reset"):
             self.arm.reset_estop()
             return Ok(info={"estopped": False})
-        self.arm.estop()  # raises estop_failed (an Error reply naming the servos) when the hold failed
-        return Ok(info={"estopped": True})
+        held = self.arm.estop()  # raises estop_failed (an Error reply naming the servos) when the hold failed
+        info: dict = {"estopped": True}
+        if "gripper_opening" in held:  # where the fingers were held (m)
+            info["gripper_opening"] = float(held["gripper_opening"])
+        return Ok(info=info)
 
     async def scene(self, msg: Message | None, ctx: QueryContext) -> Ok:
         if not isinstance(msg, SceneRequest):

@@ -78,6 +78,7 @@ class DynamixelArmDriver(ArmDriver):
         self._silent: dict[int, str] = {}  # id -> name of servos that stopped answering (left out of reads)
         self._preempt = threading.Event()  # a stop is waiting for the bus: readers give up their retries
         self.keep_grip = False  # the gripper holds an object: a stop leaves its grip as it is
+        self.last_hold: dict = {}  # what the last stop held: joints (rad) and the gripper opening (m)
         self.servo_info: dict[int, dict] = {}  # id -> {"model", "model_number", "firmware"} read at connect
 
     @property
@@ -439,6 +440,7 @@ class DynamixelArmDriver(ArmDriver):
             self._require()
             present = self._sync_read_positions(retries=0, strict=False)
             unheld = dict(self._silent)
+            self.last_hold = {"q": [float(v) for v in present]}
             self._sync_goals(present, skip=set(unheld))
             self._last_goal = present
             g = self.config.gripper
@@ -447,6 +449,7 @@ class DynamixelArmDriver(ArmDriver):
                     value, res, err = self._ph.read4ByteTxRx(self._port, g.dxl_id, g.table.present_position)
                     self._check(res, err, "gripper position read", g.dxl_id)
                     self._write(g.dxl_id, g.table.goal_position, 4, _signed32(value), "gripper hold")
+                    self.last_hold["gripper_opening"] = g.to_opening(_signed32(value))
                 except DriverError:
                     unheld[g.dxl_id] = g.name
         if unheld:
