@@ -228,3 +228,32 @@ def test_estop_halts_the_gripper_while_it_closes(kin):
         assert out and isinstance(out[0], MotionStopped), out
         assert ctl.estopped and ctl.state()["estop"] == "held"
         ctl.close()
+
+
+def test_the_emulated_bus_takes_its_faults_from_its_fault_file(tmp_path):
+    """A blocked joint stops short of any goal until released; a silent servo answers nothing; a fault file
+    naming an unknown fault is refused by the writer."""
+    faults = tmp_path / "faults.json"
+    with DynamixelBusEmulator(fault_file=faults) as bus:
+        drv = DynamixelArmDriver(DynamixelConfig(port=bus.port))
+        drv.connect()
+        q0 = drv.read_joints()
+        write_faults(faults, {1: {"block_short_rad": 0.1}, 3: {"silent": True}})
+        deadline = time.monotonic() + 5.0
+        while not bus.servos[3].silent and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert bus.servos[3].silent and bus.servos[1].block_short
+        goal = q0 + np.array([0.3, 0, 0, 0, 0, 0])
+        j1 = drv.config.joints[0]
+        with bus._lock:  # a goal straight into the servo's table, as a sync write would put it
+            bus.servos[1].write(bus.servos[1].table.goal_position, j1.to_ticks(goal[0]).to_bytes(4, "little",
+                                                                                                signed=True))
+        time.sleep(1.0)
+        assert j1.to_rad(bus.snapshot()[1][0]) == pytest.approx(goal[0] - 0.1, abs=0.002)  # short of its goal
+        write_faults(faults, {})
+        time.sleep(1.0)
+        assert not bus.servos[3].silent
+        assert j1.to_rad(bus.snapshot()[1][0]) == pytest.approx(goal[0], abs=0.002)  # released: it goes on
+        drv.close()
+    with pytest.raises(ValueError):
+        write_faults(faults, {1: {"jammed": True}})
