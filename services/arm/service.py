@@ -22,7 +22,6 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import os
-import sys
 
 import numpy as np
 
@@ -50,10 +49,6 @@ class ArmService(Service):
         kin = Kinematics(config.kinematics)
         driver, _ = make_driver(self.backend, DriverContext(self.session, self.robot, kin, opts))
         self.arm = ArmController(driver, config, kinematics=kin)
-        if self.backend == "dynamixel":
-            # the event loop that answers stop shares the GIL with the bus threads (streaming, state reads,
-            # an emulated bus): hand it over every 1 ms rather than 5 so a stop does not queue behind them
-            sys.setswitchinterval(0.001)
         await self.run_cpu(self.arm.connect)
         # the state stream's bus reads: one thread, one read at a time, never on the event loop
         self._bus_reader = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="arm-state")
