@@ -140,7 +140,13 @@ class ArmController:
         """What ended the last move or the e-stop's failure (code, message, the servo named), or None."""
         if self._estop_failure is not None:
             return {**self._estop_failure, "code": "estop_failed"}
-        return None if self._fault is None else dict(self._fault)
+        if self._fault is not None:
+            return dict(self._fault)
+        suspect = getattr(self.driver, "suspected_silent", None)
+        if suspect:  # a read in progress is retrying these: named now, confirmed (or cleared) by its end
+            return {"code": "servo_silent", "message": "servo(s) did not answer the read in progress (retrying)",
+                    "ids": sorted(suspect), "servos": [suspect[i] for i in sorted(suspect)], "confirmed": False}
+        return None
 
     def _hold_after_fault(self, exc: ArmError) -> None:
         """A fault ended a move: hold every servo where it is (no servo keeps a goal it was not asked to

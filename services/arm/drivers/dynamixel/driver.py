@@ -76,6 +76,7 @@ class DynamixelArmDriver(ArmDriver):
         self._last_goal: np.ndarray | None = None
         self._present = np.zeros(len(self._joints))  # last positions read (a silent servo keeps its last one)
         self._silent: dict[int, str] = {}  # id -> name of servos that stopped answering (left out of reads)
+        self._suspect: dict[int, str] = {}  # missed the read in progress: named at once, before the retries
         self._preempt = threading.Event()  # a stop is waiting for the bus: readers give up their retries
         self.keep_grip = False  # the gripper holds an object: a stop leaves its grip as it is
         self.last_hold: dict = {}  # what the last stop held: joints (rad) and the gripper opening (m)
@@ -268,6 +269,12 @@ class DynamixelArmDriver(ArmDriver):
         return dict(self._silent)
 
     @property
+    def suspected_silent(self) -> dict[int, str]:
+        """Servos that missed an attempt of the read still in progress (its retries decide): so a state
+        stream names a servo that falls silent one packet timeout after it did, not after every retry."""
+        return dict(self._suspect)
+
+    @property
     def last_present(self) -> np.ndarray:
         """The joint positions last read (a silent servo's is where it last answered)."""
         return self._present.copy()
@@ -314,16 +321,20 @@ class DynamixelArmDriver(ArmDriver):
             while grp.read.data_dict:
                 ids = list(grp.read.data_dict)
                 res = None
+                missing = ids[0]
                 for _ in range(attempts):
                     for i in ids:  # emptied: after a failed read, the first servo with no data is the silent one
                         grp.read.data_dict[i] = []
                     res = grp.read.txRxPacket()
                     if res == COMM_SUCCESS or self._preempt.is_set():
                         break  # a stop waits for the bus: it is told what is missing, not kept waiting
+                    missing = next((i for i in ids if not grp.read.data_dict[i]), ids[0])
+                    self._suspect[missing] = self._name_of(missing)
+                self._suspect.clear()
                 if res == COMM_SUCCESS:
                     available = [i for i in ids if grp.read.isAvailable(i, addr, 4)]
                     break
-                self._mark_silent([next((i for i in ids if not grp.read.data_dict[i]), ids[0])])
+                self._mark_silent([missing])
                 attempts = 1  # the others, read once more without it
             for k in grp.index:
                 j = self._joints[k]
@@ -432,13 +443,14 @@ class DynamixelArmDriver(ArmDriver):
 
     def stop(self) -> None:
         """Hold: goal = present on every joint that answers and on the gripper (unless ``keep_grip``), torque
-        stays on. One attempt per read (a stop does not retry a silent servo); a servo that could not be held
-        raises ``hold_failed`` naming it, after every other servo was held."""
+        stays on. At most one retry per read, none for a servo already known silent; a servo that could not
+        be held raises ``hold_failed`` naming it, after every other servo was held."""
         self._preempt.set()  # a reader retrying a silent servo gives the bus up now
         with self._lock:
             self._preempt.clear()
             self._require()
-            present = self._sync_read_positions(retries=0, strict=False)
+            # one retry at most (a loaded host can miss one status packet); known-silent servos are not asked
+            present = self._sync_read_positions(retries=min(self.config.retries, 1), strict=False)
             unheld = dict(self._silent)
             self.last_hold = {"q": [float(v) for v in present]}
             self._sync_goals(present, skip=set(unheld))
@@ -447,6 +459,8 @@ class DynamixelArmDriver(ArmDriver):
             if g is not None and not self.keep_grip and g.dxl_id not in unheld:
                 try:
                     value, res, err = self._ph.read4ByteTxRx(self._port, g.dxl_id, g.table.present_position)
+                    if res != COMM_SUCCESS and self.config.retries:
+                        value, res, err = self._ph.read4ByteTxRx(self._port, g.dxl_id, g.table.present_position)
                     self._check(res, err, "gripper position read", g.dxl_id)
                     self._write(g.dxl_id, g.table.goal_position, 4, _signed32(value), "gripper hold")
                     self.last_hold["gripper_opening"] = g.to_opening(_signed32(value))
