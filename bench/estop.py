@@ -44,6 +44,7 @@ import numpy as np
 from common import keys
 from common.client import request_sync
 from common.codec import decode
+from common.errors import InvalidRequest
 from common.launcher import ProcessSpec, ServiceGroup
 from common.messages import Error, Ok
 from services.cell import cell_specs
@@ -208,10 +209,12 @@ def run(quick: bool = False, arm_backend: str = "sim", emulate_bus: bool = False
     ``bench/_estop_scenarios.py`` (idle, streaming, settling with a blocked joint, a silent servo, the
     gripper closing)."""
     if arm_backend not in ("sim", "dynamixel"):
-        raise ValueError(f"bench estop runs on the sim or the dynamixel arm backend, not {arm_backend!r}")
+        raise InvalidRequest(f"bench estop runs on the sim or the dynamixel arm backend, not {arm_backend!r}",
+                             code="bad_value", detail={"arm_backend": arm_backend})
     if arm_backend == "dynamixel" and not emulate_bus:
-        raise ValueError("bench estop on the dynamixel backend needs --emulate-bus (it injects faults into the "
-                         "emulated bus; it never drives a real arm)")
+        raise InvalidRequest("bench estop on the dynamixel backend needs --emulate-bus (it injects faults into "
+                             "the emulated bus; it never drives a real arm)", code="bad_value",
+                             detail={"arm_backend": arm_backend})
     n = 100 if quick else 500
     work = Path(tempfile.mkdtemp(prefix="objscan-bench-estop-"))
     specs = cell_specs(["sim", "arm"])
