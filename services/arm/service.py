@@ -83,15 +83,22 @@ class ArmService(Service):
             pass
 
     async def _stream_state(self) -> None:
+        """Publish at ``STATE_RATE_HZ`` on a fixed schedule: each tick waits for the bus read only until the
+        tick is due (re-anchored when the process was not scheduled for more than a period)."""
+        assert self.loop is not None
         period = 1.0 / STATE_RATE_HZ
+        due = self.loop.time()
         while True:
-            t0 = self.loop.time() if self.loop else 0.0
-            await self._refresh_bounded(period)
+            due += period
+            await self._refresh_bounded(max(0.0, due - self.loop.time()))
             try:
                 self.state_pub.put(self._joint_state())
             except Exception:  # a publishing hiccup must not end the stream; the next tick retries
                 pass
-            await asyncio.sleep(max(0.0, period - ((self.loop.time() if self.loop else 0.0) - t0)))
+            delay = due - self.loop.time()
+            if delay < -period:
+                due = self.loop.time()
+            await asyncio.sleep(max(0.0, delay))
 
     def _result(self, info: dict) -> MoveResult:
         s = self.arm.state(read=False)
