@@ -17,6 +17,12 @@ Meanwhile the measuring process sends ``arm/stop`` every 20 ms and times each ro
 ``estop_ms_p50``/``estop_ms_p99``/``estop_ms_max`` under that load (target: p99 <= 50 ms), the same without
 load (``idle_estop_ms_*``, measured in the same run first), ``stops_answered`` of ``stops_sent``, the arm
 still alive, and ``hostile``: what was sent and how the arm answered it (reply codes counted).
+
+``--arm-backend dynamixel --emulate-bus``: the same figures with the real DYNAMIXEL driver on the emulated
+PAPRAS bus, plus ``scenarios`` (``bench/_estop_scenarios.py``): the e-stop idle, while streaming, while the
+settle check waits for a blocked joint, with one silent servo and with the gripper closing, each with
+``estop_ms_p99``, ``sent`` and ``answered`` (target: p99 <= 50 ms everywhere, gripper travel after the stop
+< 2 mm). Without those flags the bench runs on the sim backend, as before.
 """
 
 from __future__ import annotations
@@ -38,7 +44,8 @@ import numpy as np
 from common import keys
 from common.client import request_sync
 from common.codec import decode
-from common.launcher import ServiceGroup
+from common.errors import InvalidRequest
+from common.launcher import ProcessSpec, ServiceGroup
 from common.messages import Error, Ok
 from services.cell import cell_specs
 
@@ -196,10 +203,32 @@ def _pct(values: list[float], q: float) -> float:
     return round(float(np.percentile(values, q)), 2)
 
 
-def run(quick: bool = False) -> dict[str, Any]:
+def run(quick: bool = False, arm_backend: str = "sim", emulate_bus: bool = False) -> dict[str, Any]:
+    """The figures above; with ``arm_backend="dynamixel", emulate_bus=True`` the arm runs the DYNAMIXEL
+    driver on its emulated PAPRAS bus and ``scenarios`` adds the e-stop in each situation of
+    ``bench/_estop_scenarios.py`` (idle, streaming, settling with a blocked joint, a silent servo, the
+    gripper closing)."""
+    if arm_backend not in ("sim", "dynamixel"):
+        raise InvalidRequest(f"bench estop runs on the sim or the dynamixel arm backend, not {arm_backend!r}",
+                             code="bad_value", detail={"arm_backend": arm_backend})
+    if arm_backend == "dynamixel" and not emulate_bus:
+        raise InvalidRequest("bench estop on the dynamixel backend needs --emulate-bus (it injects faults into "
+                             "the emulated bus; it never drives a real arm)", code="bad_value",
+                             detail={"arm_backend": arm_backend})
     n = 100 if quick else 500
-    with ServiceGroup(log_dir=Path(tempfile.mkdtemp(prefix="objscan-bench-estop-"))) as group:
-        group.launch(cell_specs(["sim", "arm"]), timeout=180)
+    work = Path(tempfile.mkdtemp(prefix="objscan-bench-estop-"))
+    specs = cell_specs(["sim", "arm"])
+    fault_file = work / "bus-faults.json"
+    if arm_backend == "dynamixel":
+        from services.arm.drivers.dynamixel.emulator import FAULT_FILE_ENV, write_faults
+
+        write_faults(fault_file, {})
+        specs = [sp if sp.service != "arm" else ProcessSpec(
+            sp.module, ["--backend", "dynamixel", "--emulate-bus"], service="arm",
+            env={FAULT_FILE_ENV: str(fault_file)}) for sp in specs]
+    scenarios: dict[str, Any] | None = None
+    with ServiceGroup(log_dir=work) as group:
+        group.launch(specs, timeout=180)
         s = group.session
         idle = time_stops(s, ROBOT, max(20, n // 5))
         hostile = HostileLoad(group)
@@ -211,7 +240,17 @@ def run(quick: bool = False) -> dict[str, Any]:
             health = request_sync(s, keys.health("arm", "*"), timeout=30) if alive else None
         except Exception:
             health = None
+        if arm_backend == "dynamixel" and alive:
+            from bench._estop_scenarios import run_scenarios
+            from services.arm.drivers.dynamixel.robot_config import load_robot_config
+
+            scenarios = run_scenarios(s, ROBOT, fault_file, np.asarray(load_robot_config().home), quick)
     answered = sum(1 for v in loaded if v < 30_000)
+    extra: dict[str, Any] = {}
+    if scenarios is not None:
+        extra = {"arm_backend": arm_backend, "emulate_bus": emulate_bus, "scenarios": scenarios,
+                 "scenarios_meet_target": all(b["estop_ms_p99"] <= TARGET_P99_MS and b["answered"] == b["sent"]
+                                              for b in scenarios.values())}
     return {
         "estop_ms_p50": _pct(loaded, 50), "estop_ms_p99": _pct(loaded, 99), "estop_ms_max": _pct(loaded, 100),
         "stops_sent": len(loaded), "stops_answered": answered,
@@ -220,6 +259,7 @@ def run(quick: bool = False) -> dict[str, Any]:
         "arm_alive_after": alive and health is not None,
         "hostile": {"load": describe_hostile_load(), **load},
         "load_average": list(os.getloadavg()),
+        **extra,
     }
 
 

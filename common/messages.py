@@ -165,6 +165,10 @@ class JointState(Message):
     T_base_camera: np.ndarray | None = array_field("<f8", (4, 4), optional=True)
     gripper_opening: float = 0.0
     moving: bool = False
+    # a real arm's safety state: "" / "held" (e-stop latched, every servo held) / "failed" (the hold did not
+    # reach every servo), and what ended the last move or the e-stop's failure (code, message, servo named)
+    estop: str = ""
+    fault: dict = field(default_factory=dict)
 
     def validate(self) -> None:
         if len(self.names) != self.position.shape[0]:

@@ -4,8 +4,12 @@ It holds the driver, the kinematics, the collision world (table + an optional ob
 sets) and the safety envelope. Every move is planned, then checked in full (envelope: limits, workspace,
 TCP height; collisions sampled along the motion) and only then streamed to the driver, so a refused
 command never moves the arm. Moves block until finished or failed (the service face runs them in an
-executor); ``estop()`` from any other thread halts a running motion before its next set-point and
-latches until ``reset_estop()``. ``state()`` is cheap enough for a 50 Hz publisher.
+executor); ``estop()`` from any other thread halts a running motion before its next set-point (or ends
+its settle check at once), holds every servo where it is, the gripper too, and latches until
+``reset_estop()``; when the hold could not be written to some servo the e-stop latches as *failed* and
+says which. Every fault that ends a move (tracking error, hardware error, silent servo, timeout) leaves
+the arm holding where it is, and ``state()`` says what happened (``fault``). ``state(read=False)`` touches
+no bus: the service's state stream reads the bus in a thread of its own.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ import pinocchio as pin
 
 from services.arm.collision import CollisionConfig, CollisionWorld
 from services.arm.drivers.base import ArmDriver, execute
-from services.arm.errors import ArmError, BadCommand, DriverError, MotionStopped
+from services.arm.errors import ArmError, BadCommand, DriverError, EnvelopeError, MotionStopped
 from services.arm.kinematics import Kinematics, KinematicsConfig, check_transform
 from services.arm.motion import (
     JointTrajectory,
@@ -65,7 +69,10 @@ class ArmController:
         self.safety.check_limits_fit(self.config.limits)
         self._motion_lock = threading.Lock()
         self._stop = threading.Event()
-        self._estopped = False
+        self._estopped = False  # latched (held or failed) until reset
+        self._estop_failure: dict | None = None  # the servos the e-stop's hold did not reach
+        self._fault: dict | None = None  # what ended the last move, when a fault did
+        self._gripper_busy = False
         self._moving = False
         self._q = np.zeros(6)
         self._opening = 0.0
@@ -89,32 +96,95 @@ class ArmController:
         self.close()
 
     # ------------------------------------------------------------------ e-stop
-    def estop(self) -> None:
-        """Halt a running motion at once (from any thread) and refuse new ones until ``reset_estop``."""
+    def estop(self) -> dict:
+        """Halt now (from any thread) and refuse motion until ``reset_estop``: the streaming loop stops
+        before its next set-point, a settle check ends, and the hold (goal = present on every servo, the
+        gripper included unless it holds an object) is written here, not left to the motion thread.
+
+        Raises ``DriverError`` (``estop_failed``, naming the servos) when the hold could not be written to
+        every servo; the e-stop then stays latched as failed (``estopped`` is False, ``estop_status`` says
+        ``failed``). Returns what the hold read, when the driver says (``q``, ``gripper_opening``)."""
         self._estopped = True
         self._stop.set()
-        if not self._moving:
-            try:
-                self.driver.stop()
-            except (DriverError, ArmError):
-                pass
+        try:
+            self.driver.stop()
+        except (DriverError, ArmError) as exc:
+            self._estop_failure = {"code": exc.code, "message": exc.message, **exc.detail}
+            raise DriverError(f"emergency stop NOT confirmed: {exc.message}", code="estop_failed",
+                              detail=dict(exc.detail)) from exc
+        self._estop_failure = None
+        return dict(getattr(self.driver, "last_hold", None) or {})
 
     def reset_estop(self) -> None:
+        """Clear a latched stop (held or failed) and any fault: silent servos are checked again."""
         self._estopped = False
+        self._estop_failure = None
+        self._fault = None
         self._stop.clear()
+        self.driver.clear_faults()
 
     @property
     def estopped(self) -> bool:
-        return self._estopped
+        """True only when an e-stop is latched and its hold reached every servo."""
+        return self._estopped and self._estop_failure is None
+
+    @property
+    def estop_status(self) -> str:
+        """``""`` (not latched), ``held`` or ``failed`` (the hold did not reach every servo)."""
+        if not self._estopped:
+            return ""
+        return "failed" if self._estop_failure is not None else "held"
+
+    @property
+    def fault(self) -> dict | None:
+        """What ended the last move or the e-stop's failure (code, message, the servo named), or None."""
+        if self._estop_failure is not None:
+            return {**self._estop_failure, "code": "estop_failed"}
+        if self._fault is not None:
+            return dict(self._fault)
+        suspect = getattr(self.driver, "suspected_silent", None)
+        if suspect:  # a read in progress is retrying these: named now, confirmed (or cleared) by its end
+            return {"code": "servo_silent", "message": "servo(s) did not answer the read in progress (retrying)",
+                    "ids": sorted(suspect), "servos": [suspect[i] for i in sorted(suspect)], "confirmed": False}
+        return None
+
+    def _hold_after_fault(self, exc: ArmError) -> None:
+        """A fault ended a move: hold every servo where it is (no servo keeps a goal it was not asked to
+        hold) and remember what happened for ``state()``."""
+        self._fault = {"code": exc.code, "message": exc.message, **exc.detail, "stamp": time.time()}
+        try:
+            self.driver.stop()
+        except (DriverError, ArmError) as hold_exc:
+            self._fault["hold_failed"] = hold_exc.detail.get("servos", hold_exc.message)
+        present = getattr(self.driver, "last_present", None)
+        if present is not None:
+            self._q = np.asarray(present, dtype=np.float64)
 
     # ------------------------------------------------------------------ state
-    def state(self) -> dict:
-        """q, gripper opening, TCP and camera poses in base, moving/estop flags. No bus traffic while moving."""
-        if not self._moving:
+    def refresh(self) -> None:
+        """Read where the arm and the gripper are (the bus; not while a motion streams). A servo that does
+        not answer is recorded as a fault naming it; the others' positions are still taken."""
+        if self._moving:
+            return
+        try:
+            self._q = self.driver.read_joints()
+        except (DriverError, ArmError) as exc:
+            if self._fault is None or self._fault.get("code") != exc.code:
+                self._fault = {"code": exc.code, "message": exc.message, **exc.detail, "stamp": time.time()}
+            present = getattr(self.driver, "last_present", None)
+            if present is not None:
+                self._q = np.asarray(present, dtype=np.float64)
+        if not self._gripper_busy:
             try:
-                self._q = self.driver.read_joints()
+                self._opening = self.driver.read_gripper()
             except (DriverError, ArmError):
                 pass
+
+    def state(self, read: bool = True) -> dict:
+        """q, gripper opening, TCP and camera poses in base, moving/estop flags and the last fault.
+        ``read``: read the bus first (``refresh``); never while moving."""
+        if read:
+            self.refresh()
         q = self._q.copy()
         kin = self.kinematics
         with self._state_lock:
@@ -128,7 +198,9 @@ class ArmController:
             "T_base_gripper": Tg,
             "T_base_camera": Tc,
             "moving": self._moving,
-            "estopped": self._estopped,
+            "estopped": self.estopped,
+            "estop": self.estop_status,
+            "fault": self.fault,
             "stamp": time.time(),
         }
 
@@ -185,6 +257,7 @@ class ArmController:
             return info
         if self._estopped:
             raise MotionStopped("emergency stop is latched; reset it before moving", code="estop_latched")
+        self._fault = None
         self._moving = True
         try:
             result = execute(
@@ -196,15 +269,23 @@ class ArmController:
                 check=self.safety.check_setpoint,
                 on_setpoint=self._on_setpoint,
             )
+            if result.stopped:
+                raise MotionStopped(
+                    "motion halted by emergency stop",
+                    detail={"after_s": round(result.elapsed_s, 3), "setpoints_sent": result.setpoints_sent},
+                )
+            # the last set-point is not the arm's position: every backend confirms the arm got there (a stop
+            # ends that check at once)
+            q = self.driver.settle(np.asarray(trajectory.q_end, dtype=np.float64), stop_event=self._stop)
+            self._q = q
+            if self._stop.is_set():
+                raise MotionStopped("motion halted by emergency stop while settling",
+                                    detail={"setpoints_sent": result.setpoints_sent})
+        except (DriverError, EnvelopeError) as exc:
+            self._hold_after_fault(exc)
+            raise
         finally:
             self._moving = False
-        if result.stopped:
-            raise MotionStopped(
-                "motion halted by emergency stop",
-                detail={"after_s": round(result.elapsed_s, 3), "setpoints_sent": result.setpoints_sent},
-            )
-        # the last set-point is not the arm's position: every backend confirms the arm got there
-        self._q = self.driver.settle(np.asarray(trajectory.q_end, dtype=np.float64))
         info.update(setpoints_sent=result.setpoints_sent, elapsed_s=result.elapsed_s)
         return info
 
@@ -299,24 +380,47 @@ class ArmController:
             raise MotionStopped("emergency stop is latched; reset it before moving", code="estop_latched")
         cfg = self.config
         with self._exclusive():
-            self.driver.set_gripper(o, f)
-            t0 = last_change = time.monotonic()
-            prev = self.driver.read_gripper()
-            while True:
-                cur = self.driver.read_gripper()
-                self._opening = cur
-                if abs(cur - o) <= cfg.gripper_tolerance:
-                    return {"opening": cur, "grasped": False, "elapsed_s": time.monotonic() - t0}
-                now = time.monotonic()
-                if abs(cur - prev) > 1e-4:
-                    last_change, prev = now, cur
-                elif now - last_change > cfg.gripper_stall_s:
-                    return {"opening": cur, "grasped": True, "elapsed_s": now - t0}
-                if now - t0 > cfg.gripper_timeout_s:
-                    raise DriverError(
-                        "gripper did not reach its target in time",
-                        code="gripper_timeout",
-                        detail={"target": o, "opening": cur},
-                    )
-                if self._stop.wait(0.01):
-                    raise MotionStopped("gripper motion halted by emergency stop")
+            self._gripper_busy = True
+            try:
+                return self._run_gripper(o, f, cfg)
+            except (DriverError, EnvelopeError) as exc:
+                self._hold_after_fault(exc)
+                raise
+            finally:
+                self._gripper_busy = False
+
+    def _run_gripper(self, o: float, f: float, cfg: ArmConfig) -> dict:
+        # a new command: the grip policy of a stop is "hold where the fingers are" until they close on
+        # something (then a stop keeps the grip: letting go of the object is no safer)
+        self.driver.keep_grip = False
+        self.driver.set_gripper(o, f)
+        if self._stop.is_set():  # an e-stop came while the goal was on its way: hold again, after it
+            self._hold_quietly()
+            raise MotionStopped("gripper motion halted by emergency stop")
+        t0 = last_change = time.monotonic()
+        prev = self.driver.read_gripper()
+        while True:
+            cur = self.driver.read_gripper()
+            self._opening = cur
+            if abs(cur - o) <= cfg.gripper_tolerance:
+                return {"opening": cur, "grasped": False, "elapsed_s": time.monotonic() - t0}
+            now = time.monotonic()
+            if abs(cur - prev) > 1e-4:
+                last_change, prev = now, cur
+            elif now - last_change > cfg.gripper_stall_s:
+                self.driver.keep_grip = True
+                return {"opening": cur, "grasped": True, "elapsed_s": now - t0}
+            if now - t0 > cfg.gripper_timeout_s:
+                raise DriverError(
+                    "gripper did not reach its target in time",
+                    code="gripper_timeout",
+                    detail={"target": o, "opening": cur},
+                )
+            if self._stop.wait(0.01):
+                raise MotionStopped("gripper motion halted by emergency stop")
+
+    def _hold_quietly(self) -> None:
+        try:
+            self.driver.stop()
+        except (DriverError, ArmError):
+            pass  # the e-stop reports its own hold

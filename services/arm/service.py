@@ -6,15 +6,21 @@
   (checking a chain of moves before the first runs); a dry run's reply carries the configuration the motion
   would end in.
 - ``arm/gripper`` (``GripperRequest``) → ``GripperResult`` (opening reached, holding something or not).
-- ``arm/stop`` → halts any motion at once (handled on the event loop, never queued behind a move);
-  ``Request(params={"reset": true})`` clears a latched stop.
+- ``arm/stop`` → halts any motion at once (handled on the event loop, never queued behind a move, a settle
+  check or a state read) and holds every servo, the gripper included; ``Ok(estopped=True)`` only when the
+  hold reached every servo, else an ``estop_failed`` error naming the servos (the stop stays latched as
+  failed). ``Request(params={"reset": true})`` clears a latched stop.
 - ``arm/scene`` (``SceneRequest``) → the object box the collision checker avoids.
-- ``arm/state``: queryable and a ≥ 50 Hz ``JointState`` stream with TCP and camera poses.
+- ``arm/state``: queryable and a ≥ 50 Hz ``JointState`` stream with TCP and camera poses, the e-stop state
+  and the last fault. The bus is read in a thread of its own, one read at a time, and the stream never
+  waits for it longer than one period (it publishes the last known state meanwhile), so a silent servo or
+  a slow bus never holds the event loop that serves ``stop`` and health.
 """
 
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import os
 
 import numpy as np
@@ -44,6 +50,9 @@ class ArmService(Service):
         driver, _ = make_driver(self.backend, DriverContext(self.session, self.robot, kin, opts))
         self.arm = ArmController(driver, config, kinematics=kin)
         await self.run_cpu(self.arm.connect)
+        # the state stream's bus reads: one thread, one read at a time, never on the event loop
+        self._bus_reader = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="arm-state")
+        self._refresh: asyncio.Future | None = None
         r = self.robot
         # commands are small: a hostile megabyte is refused unread; stop is never queued behind anything
         self.queryable(keys.arm(r, "move"), self.move, budget=COMMAND_BUDGET)
@@ -55,22 +64,44 @@ class ArmService(Service):
         self.spawn(self._stream_state())
 
     def _joint_state(self) -> JointState:
-        s = self.arm.state()
+        """The last known state (no bus traffic: ``_refresh_bounded`` reads the bus off the loop)."""
+        s = self.arm.state(read=False)
         return JointState(names=s["names"], position=np.asarray(s["q"], dtype=np.float64), stamp=s["stamp"],
                           T_base_gripper=s["T_base_gripper"], T_base_camera=s["T_base_camera"],
-                          gripper_opening=s["gripper_opening"], moving=s["moving"])
+                          gripper_opening=s["gripper_opening"], moving=s["moving"], estop=s["estop"],
+                          fault=s["fault"] or {})
+
+    async def _refresh_bounded(self, timeout: float) -> None:
+        """Read the bus in the reader thread, waiting at most ``timeout``; a read still running is not
+        started twice (a slow read finishes in the background and the next tick uses it)."""
+        assert self.loop is not None
+        if self._refresh is None or self._refresh.done():
+            self._refresh = self.loop.run_in_executor(self._bus_reader, self.arm.refresh)
+        try:
+            await asyncio.wait_for(asyncio.shield(self._refresh), timeout)
+        except Exception:  # slow (TimeoutError) or failed: the state says the last known
+            pass
 
     async def _stream_state(self) -> None:
+        """Publish at ``STATE_RATE_HZ`` on a fixed schedule: each tick waits for the bus read only until the
+        tick is due (re-anchored when the process was not scheduled for more than a period)."""
+        assert self.loop is not None
         period = 1.0 / STATE_RATE_HZ
+        due = self.loop.time()
         while True:
+            due += period
+            await self._refresh_bounded(max(0.0, due - self.loop.time()))
             try:
                 self.state_pub.put(self._joint_state())
-            except Exception:  # a bus hiccup must not end the stream; the next tick retries
+            except Exception:  # a publishing hiccup must not end the stream; the next tick retries
                 pass
-            await asyncio.sleep(period)
+            delay = due - self.loop.time()
+            if delay < -period:
+                due = self.loop.time()
+            await asyncio.sleep(max(0.0, delay))
 
     def _result(self, info: dict) -> MoveResult:
-        s = self.arm.state()
+        s = self.arm.state(read=False)
         return MoveResult(q=np.asarray(s["q"], dtype=np.float64), T_base_gripper=s["T_base_gripper"],
                           T_base_camera=s["T_base_camera"], duration_s=float(info.get("duration_s", 0.0)),
                           info={k: v for k, v in info.items() if isinstance(v, (int, float, str, bool))})
@@ -115,8 +146,11 @@ class ArmService(Service):
         if isinstance(msg, Request) and msg.params.get("reset"):
             self.arm.reset_estop()
             return Ok(info={"estopped": False})
-        self.arm.estop()
-        return Ok(info={"estopped": True})
+        held = self.arm.estop()  # raises estop_failed (an Error reply naming the servos) when the hold failed
+        info: dict = {"estopped": True}
+        if "gripper_opening" in held:  # where the fingers were held (m)
+            info["gripper_opening"] = float(held["gripper_opening"])
+        return Ok(info=info)
 
     async def scene(self, msg: Message | None, ctx: QueryContext) -> Ok:
         if not isinstance(msg, SceneRequest):
@@ -130,14 +164,23 @@ class ArmService(Service):
         return Ok(info={"object_box": bool(np.max(msg.extent) > 0)})
 
     async def state(self, msg: Message | None, ctx: QueryContext) -> JointState:
+        await self._refresh_bounded(1.0 / STATE_RATE_HZ)
         return self._joint_state()
 
     async def teardown(self) -> None:
-        self.arm.estop()
+        try:
+            self.arm.estop()
+        except Exception:  # noqa: BLE001 - shutting down: the servos hold or relax per the shutdown policy
+            pass
         await self.run_cpu(self.arm.close)
+        self._bus_reader.shutdown(wait=False)
 
     def health_info(self) -> dict[str, object]:
-        info: dict[str, object] = {"backend": self.backend, "estopped": self.arm.estopped}
+        info: dict[str, object] = {"backend": self.backend, "estopped": self.arm.estopped,
+                                   "estop": self.arm.estop_status}
+        fault = self.arm.fault
+        if fault:
+            info["fault"] = fault
         servos = getattr(self.arm.driver, "servo_info", None)  # dynamixel: what answered at connect
         if servos:
             info["servos"] = {str(i): v["model"] for i, v in servos.items()}

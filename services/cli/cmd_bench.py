@@ -27,12 +27,26 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--quick", action="store_true", help="a smaller run for a fast check")
     p.add_argument("--set", dest="object_set", choices=["harsh", "realistic", "all"], default=None,
                    help="reconstruct: which object set (harsh primitives, realistic HOPE objects; default all)")
+    p.add_argument("--arm-backend", choices=["sim", "dynamixel"],
+                   help="the arm backend, for benchmarks that take one (estop; default: sim)")
+    p.add_argument("--emulate-bus", action="store_true",
+                   help="dynamixel: the emulated PAPRAS bus (the only bus a benchmark drives)")
     p.set_defaults(func=run)
+
+
+def _arm_options(module, args) -> dict:  # noqa: ANN001
+    """``--arm-backend``/``--emulate-bus`` for a benchmark whose ``run`` takes them; refused for others."""
+    wanted = {k: v for k, v in (("arm_backend", args.arm_backend), ("emulate_bus", args.emulate_bus)) if v}
+    accepted = inspect.signature(module.run).parameters
+    refused = [k for k in wanted if k not in accepted]
+    if refused:
+        raise SystemExit(f"objscan bench {args.name} takes no {', '.join('--' + k.replace('_', '-') for k in refused)}")
+    return wanted
 
 
 def run(args) -> int:  # noqa: ANN001
     module = importlib.import_module(f"bench.{args.name}")
-    kwargs = {"quick": args.quick}
+    kwargs = {"quick": args.quick, **_arm_options(module, args)}
     if getattr(args, "object_set", None):
         if "object_set" not in inspect.signature(module.run).parameters:
             print(f"objscan bench {args.name} has no object sets (--set is for reconstruct)")

@@ -54,6 +54,8 @@ def _data() -> dict:
     (lambda d: d["joints"].pop("robot1/joint6"), "joints"),
     (lambda d: d["joints"]["robot1/joint6"].update(id=111), "joints"),
     (lambda d: d.update(home=[0.0, 1.0]), "home"),
+    (lambda d: d.update(settle_timeout_s=30.0), "settle_timeout_s"),  # bounded: a blocked joint pushes no longer
+    (lambda d: d.update(settle_timeout_s=0), "settle_timeout_s"),
 ])
 def test_bad_configurations_name_the_key(edit, key):
     d = copy.deepcopy(_data())

@@ -45,11 +45,19 @@ class ArmDriver(ABC):
         """Read-only backends only: go back to their first state (a moving arm goes to ``home_q`` instead)."""
         raise BadCommand(f"the {self.name} driver moves to home_q through the controller", code="bad_value")
 
-    def settle(self, q: np.ndarray) -> np.ndarray:
+    # the gripper holds an object: a stop leaves its grip as it is (set by the controller; stated policy)
+    keep_grip = False
+
+    def settle(self, q: np.ndarray, stop_event: threading.Event | None = None) -> np.ndarray:
         """After a motion: confirm the arm reached ``q`` and return where it is. Hardware backends wait for
-        the servos and raise ``DriverError`` (``tracking_error``) when a joint stays off; a twin that follows
-        set-points exactly has nothing to wait for."""
+        the servos (ending the wait at once when ``stop_event`` is set) and raise ``DriverError``
+        (``tracking_error``) when a joint stays off; a twin that follows set-points exactly has nothing to
+        wait for."""
         return self.read_joints()
+
+    def clear_faults(self) -> None:
+        """Forget servos found silent so the next read checks them again (after an e-stop reset)."""
+        return None
 
     @abstractmethod
     def connect(self) -> None:
@@ -81,7 +89,9 @@ class ArmDriver(ABC):
 
     @abstractmethod
     def stop(self) -> None:
-        """Halt now: hold the present position."""
+        """Halt now: hold the present position, joints and gripper (unless ``keep_grip``). Never waits for a
+        motion or a settle; raises ``DriverError`` (``hold_failed``, naming the servos) when the hold could
+        not be written to every servo."""
 
     def __enter__(self) -> ArmDriver:
         self.connect()
@@ -154,7 +164,10 @@ def execute(
             pass
         raise
     stopped = stop_event.is_set() and sent < n + 1
-    if stopped:
-        driver.stop()
+    if stopped:  # hold again: a set-point may have gone out after the e-stop's own hold
+        try:
+            driver.stop()
+        except DriverError:  # the e-stop that set the event reports its own hold
+            pass
     q_last = q_prev if q_prev is not None else trajectory.q_start
     return ExecutionResult(not stopped, stopped, sent, time.perf_counter() - t_start, np.asarray(q_last))

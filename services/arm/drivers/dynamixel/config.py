@@ -37,6 +37,11 @@ def _default_gripper() -> GripperServoConfig | None:
     return copy.deepcopy(_papras()["gripper"])
 
 
+# the longest a settle check may wait for the servos after a motion (s): a joint that has not arrived by
+# then is blocked or broken, and the arm holds where it is; a longer wait only lets it push longer
+MAX_SETTLE_TIMEOUT_S = 5.0
+
+
 @dataclass
 class DynamixelConfig:
     """Bus and servos. ``profile_velocity``/``profile_acceleration`` (rad/s, rad/s^2) are written to a joint
@@ -44,7 +49,8 @@ class DynamixelConfig:
 
     ``shutdown``: ``hold`` keeps torque on at close (the PAPRAS arm falls when limp), ``relax`` turns it
     off. An e-stop always holds (goal = present, torque stays on). ``settle_tolerance``/``settle_timeout_s``:
-    after a motion every joint must be within the tolerance of its last set-point, else ``tracking_error``.
+    after a motion every joint must be within the tolerance of its last set-point, else ``tracking_error``
+    (the timeout is bounded: (0, ``MAX_SETTLE_TIMEOUT_S``] s).
     """
 
     port: str = "/dev/ttyUSB0"
@@ -58,7 +64,7 @@ class DynamixelConfig:
     error_check_every: int = 10  # set-points between Hardware Error Status reads
     max_tracking_error: float = 0.35  # rad between goal and present before the motion is stopped
     settle_tolerance: float = 0.02  # rad, present vs the final set-point after a motion
-    settle_timeout_s: float = 2.0
+    settle_timeout_s: float = 2.0  # at most MAX_SETTLE_TIMEOUT_S: a joint pushing into an obstruction is a fault
     shutdown: str = "hold"
     retries: int = 1  # extra attempts of a failed read before a servo is declared silent
 
@@ -83,6 +89,9 @@ class DynamixelConfig:
             v = getattr(self, k)
             if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise _fail(k, "must be a positive number", value=repr(v))
+        if self.settle_timeout_s > MAX_SETTLE_TIMEOUT_S:
+            raise _fail("settle_timeout_s", f"the settle check waits at most {MAX_SETTLE_TIMEOUT_S} s",
+                        value=self.settle_timeout_s, max=MAX_SETTLE_TIMEOUT_S)
 
 
 __all__ = ["DynamixelConfig", "GripperServoConfig", "JointServoConfig"]

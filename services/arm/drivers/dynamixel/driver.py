@@ -11,8 +11,12 @@ pair per control-table layout on the bus), so a servo that stops answering is no
 every ``error_check_every`` cycles Hardware Error Status is read too. Either, or a tracking error beyond
 ``max_tracking_error``, raises ``DriverError`` (the controller then stops the motion). ``settle`` ends a
 motion: every joint must come within ``settle_tolerance`` of the last set-point, else ``tracking_error``
-naming the joint and its error. E-stop (``stop``) holds: goal = present, torque on. ``close`` follows the
-configured ``shutdown`` policy (``hold``: torque stays on; ``relax``: torque off).
+naming the joint and its error; it takes the bus only for each read, so a stop is never queued behind it.
+E-stop (``stop``) holds: goal = present on every servo that answers, the gripper included (unless
+``keep_grip``: it holds an object), torque on; a servo that cannot be held is named (``hold_failed``). A servo
+that stops answering is named at once (the first one missing from an ordered sync read), then left out of
+every later read, so neither the state stream nor a stop waits for it again; ``clear_faults`` takes it back.
+``close`` follows the configured ``shutdown`` policy (``hold``: torque stays on; ``relax``: torque off).
 """
 
 from __future__ import annotations
@@ -70,6 +74,12 @@ class DynamixelArmDriver(ArmDriver):
         self._cycle = 0
         self._groups: list[_Group] = []
         self._last_goal: np.ndarray | None = None
+        self._present = np.zeros(len(self._joints))  # last positions read (a silent servo keeps its last one)
+        self._silent: dict[int, str] = {}  # id -> name of servos that stopped answering (left out of reads)
+        self._suspect: dict[int, str] = {}  # missed the read in progress: named at once, before the retries
+        self._preempt = threading.Event()  # a stop is waiting for the bus: readers give up their retries
+        self.keep_grip = False  # the gripper holds an object: a stop leaves its grip as it is
+        self.last_hold: dict = {}  # what the last stop held: joints (rad) and the gripper opening (m)
         self.servo_info: dict[int, dict] = {}  # id -> {"model", "model_number", "firmware"} read at connect
 
     @property
@@ -211,12 +221,15 @@ class DynamixelArmDriver(ArmDriver):
             if vel is not None:
                 self._write(dxl_id, t.profile_velocity, 4, vel, "profile velocity")
 
-    def _sync_goals(self, q: np.ndarray) -> None:
+    def _sync_goals(self, q: np.ndarray, skip: set[int] | frozenset[int] = frozenset()) -> None:
         for grp in self._groups:
             grp.write.clearParam()
             for k in grp.index:
                 j = self._joints[k]
-                grp.write.addParam(j.dxl_id, _u32_bytes(j.to_ticks(float(q[k]))))
+                if j.dxl_id not in skip:
+                    grp.write.addParam(j.dxl_id, _u32_bytes(j.to_ticks(float(q[k]))))
+            if not grp.write.data_dict:
+                continue
             res = grp.write.txPacket()
             if res != COMM_SUCCESS:
                 raise DriverError(f"sync write failed: {self._ph.getTxRxResult(res)}", code="link_failed")
@@ -250,34 +263,93 @@ class DynamixelArmDriver(ArmDriver):
         return self._port
 
     # ------------------------------------------------------------------ joints
-    def _sync_read_positions(self) -> np.ndarray:
-        q = np.zeros(len(self._joints))
+    @property
+    def silent_servos(self) -> dict[int, str]:
+        """Servos that stopped answering (id -> name), left out of reads until ``clear_faults``."""
+        return dict(self._silent)
+
+    @property
+    def suspected_silent(self) -> dict[int, str]:
+        """Servos that missed an attempt of the read still in progress (its retries decide): so a state
+        stream names a servo that falls silent one packet timeout after it did, not after every retry."""
+        return dict(self._suspect)
+
+    @property
+    def last_present(self) -> np.ndarray:
+        """The joint positions last read (a silent servo's is where it last answered)."""
+        return self._present.copy()
+
+    def _name_of(self, dxl_id: int) -> str:
+        for name, i, _ in self._servos():
+            if i == dxl_id:
+                return name
+        return str(dxl_id)
+
+    def _mark_silent(self, ids: list[int]) -> None:
+        for i in ids:
+            if i not in self._silent:
+                self._silent[i] = self._name_of(i)
+                for grp in self._groups:
+                    if i in grp.read.data_dict:
+                        grp.read.removeParam(i)
+                        grp.errors.removeParam(i)
+
+    def _silent_error(self, ids: list[int], what: str = "the position read") -> DriverError:
+        names = [self._silent.get(i) or self._name_of(i) for i in ids]
+        return DriverError(f"servo(s) {ids} ({', '.join(names)}) did not answer {what}", code="servo_silent",
+                           detail={"ids": ids, "servos": names})
+
+    def clear_faults(self) -> None:
+        """Take silent servos back into the reads (after the cause was fixed; the next read checks them)."""
+        with self._lock:
+            for i in list(self._silent):
+                for grp in self._groups:
+                    if any(self._joints[k].dxl_id == i for k in grp.index):
+                        grp.read.addParam(i)
+                        grp.errors.addParam(i)
+            self._silent.clear()
+
+    def _sync_read_positions(self, retries: int | None = None, strict: bool = True) -> np.ndarray:
+        """Present positions of the answering joints (cached in ``_present``). A servo missing from the
+        answer is named as silent (servos answer a sync read in order, so the first one missing is the one
+        that did not answer) and left out from then on; ``strict``: raise ``servo_silent`` while any is."""
+        retries = self.config.retries if retries is None else retries
         for grp in self._groups:
             addr = grp.table.present_position
-            res = None
-            for _ in range(self.config.retries + 1):
-                res = grp.read.txRxPacket()
+            available: list[int] = []
+            attempts = retries + 1
+            while grp.read.data_dict:
+                ids = list(grp.read.data_dict)
+                res = None
+                missing = ids[0]
+                for _ in range(attempts):
+                    for i in ids:  # emptied: after a failed read, the first servo with no data is the silent one
+                        grp.read.data_dict[i] = []
+                    res = grp.read.txRxPacket()
+                    if res == COMM_SUCCESS or self._preempt.is_set():
+                        break  # a stop waits for the bus: it is told what is missing, not kept waiting
+                    missing = next((i for i in ids if not grp.read.data_dict[i]), ids[0])
+                    self._suspect[missing] = self._name_of(missing)
+                self._suspect.clear()
                 if res == COMM_SUCCESS:
+                    available = [i for i in ids if grp.read.isAvailable(i, addr, 4)]
                     break
-            ids = [self._joints[k].dxl_id for k in grp.index]
-            missing = [i for i in ids if not grp.read.isAvailable(i, addr, 4)]
-            if res != COMM_SUCCESS or missing:
-                # the sync read gives up at the first silent servo: ping them one by one to name it
-                missing = [i for i in ids if self._ph.ping(self._port, i)[1] != COMM_SUCCESS] or missing
-                raise DriverError(
-                    f"servo(s) {missing or ids} did not answer the position read: {self._ph.getTxRxResult(res)}",
-                    code="servo_silent",
-                    detail={"ids": missing},
-                )
+                self._mark_silent([missing])
+                attempts = 1  # the others, read once more without it
             for k in grp.index:
                 j = self._joints[k]
-                q[k] = j.to_rad(_signed32(grp.read.getData(j.dxl_id, addr, 4)))
-        return q
+                if j.dxl_id in available:
+                    self._present[k] = j.to_rad(_signed32(grp.read.getData(j.dxl_id, addr, 4)))
+        if strict and self._silent:
+            raise self._silent_error(sorted(self._silent))
+        return self._present.copy()
 
     def _check_hardware_errors(self, include_gripper: bool = False) -> None:
         """Hardware Error Status of every joint (and the gripper): any bit set is a typed ``servo_error``."""
         bad: dict[int, int] = {}
         for grp in self._groups:
+            if not grp.errors.data_dict:
+                continue
             for _ in range(self.config.retries + 1):
                 res = grp.errors.txRxPacket()
                 if res == COMM_SUCCESS:
@@ -287,7 +359,8 @@ class DynamixelArmDriver(ArmDriver):
                                   detail={"result": self._ph.getTxRxResult(res)})
             for k in grp.index:
                 i = self._joints[k].dxl_id
-                bad[i] = grp.errors.getData(i, grp.table.hardware_error, 1)
+                if i in grp.errors.data_dict:
+                    bad[i] = grp.errors.getData(i, grp.table.hardware_error, 1)
         g = self.config.gripper
         if include_gripper and g is not None:
             bad[g.dxl_id] = self._read(g.dxl_id, g.table.hardware_error, 1, "hardware error status")
@@ -331,26 +404,33 @@ class DynamixelArmDriver(ArmDriver):
         return DriverError(f"{name} (ID {j.dxl_id}) {what} by {err:.3f} rad", code="tracking_error",
                            detail={"joint": name, "index": k + 1, "id": j.dxl_id, "error_rad": err})
 
-    def settle(self, q: np.ndarray | None = None) -> np.ndarray:
+    def settle(self, q: np.ndarray | None = None, stop_event: threading.Event | None = None) -> np.ndarray:
         """Wait until every joint is within ``settle_tolerance`` of ``q`` (default: the last set-point).
 
-        A servo in hardware error is named as such; one that simply does not get there (stalled, blocked,
-        torque off) gives ``tracking_error`` with the joint and its error."""
+        The bus is taken for each read only, never across the wait, and the wait ends at once when
+        ``stop_event`` is set (returning where the arm is): a stop never queues behind a settle. A servo in
+        hardware error is named as such; one that simply does not get there (stalled, blocked, torque off)
+        gives ``tracking_error`` with the joint and its error."""
         cfg = self.config
         with self._lock:
             self._require()
             target = np.asarray(q if q is not None else self._last_goal, dtype=np.float64)
-            deadline = time.monotonic() + cfg.settle_timeout_s
-            while True:
+        deadline = time.monotonic() + cfg.settle_timeout_s
+        wait = stop_event.wait if stop_event is not None else time.sleep
+        while True:
+            with self._lock:
+                self._require()
                 present = self._sync_read_positions()
-                err = np.abs(present - target)
-                if np.max(err) <= cfg.settle_tolerance:
-                    return present
-                if time.monotonic() > deadline:
+            err = np.abs(present - target)
+            if np.max(err) <= cfg.settle_tolerance or (stop_event is not None and stop_event.is_set()):
+                return present
+            if time.monotonic() > deadline:
+                with self._lock:
                     self._check_hardware_errors()
-                    k = int(np.argmax(err))
-                    raise self._tracking_error(k, float(err[k]), "did not settle at its target")
-                time.sleep(0.005)
+                k = int(np.argmax(err))
+                raise self._tracking_error(k, float(err[k]), "did not settle at its target")
+            if wait(0.005) is True:
+                return present
 
     def torque(self, on: bool) -> None:
         with self._lock:
@@ -362,12 +442,35 @@ class DynamixelArmDriver(ArmDriver):
                 self._write(dxl_id, table.torque_enable, 1, 0, "torque enable")
 
     def stop(self) -> None:
-        """Hold: write the present positions as goals (torque stays on)."""
+        """Hold: goal = present on every joint that answers and on the gripper (unless ``keep_grip``), torque
+        stays on. At most one retry per read, none for a servo already known silent; a servo that could not
+        be held raises ``hold_failed`` naming it, after every other servo was held."""
+        self._preempt.set()  # a reader retrying a silent servo gives the bus up now
         with self._lock:
+            self._preempt.clear()
             self._require()
-            present = self._sync_read_positions()
-            self._sync_goals(present)
+            # one retry at most (a loaded host can miss one status packet); known-silent servos are not asked
+            present = self._sync_read_positions(retries=min(self.config.retries, 1), strict=False)
+            unheld = dict(self._silent)
+            self.last_hold = {"q": [float(v) for v in present]}
+            self._sync_goals(present, skip=set(unheld))
             self._last_goal = present
+            g = self.config.gripper
+            if g is not None and not self.keep_grip and g.dxl_id not in unheld:
+                try:
+                    value, res, err = self._ph.read4ByteTxRx(self._port, g.dxl_id, g.table.present_position)
+                    if res != COMM_SUCCESS and self.config.retries:
+                        value, res, err = self._ph.read4ByteTxRx(self._port, g.dxl_id, g.table.present_position)
+                    self._check(res, err, "gripper position read", g.dxl_id)
+                    self._write(g.dxl_id, g.table.goal_position, 4, _signed32(value), "gripper hold")
+                    self.last_hold["gripper_opening"] = g.to_opening(_signed32(value))
+                except DriverError:
+                    unheld[g.dxl_id] = g.name
+        if unheld:
+            servos = [{"id": i, "name": n} for i, n in sorted(unheld.items())]
+            named = ", ".join(f"{n} (ID {i})" for i, n in sorted(unheld.items()))
+            raise DriverError(f"the hold could not be written to {named}", code="hold_failed",
+                              detail={"servos": servos})
 
     # ------------------------------------------------------------------ gripper
     def set_gripper(self, opening_m: float, force: float) -> None:

@@ -11,14 +11,20 @@ robot configuration (``servos_for``), standing at the configuration's home postu
 
 Faults can be injected per servo (``silent``: never answers; ``alert``: hardware error bits, reported in
 every status packet and in Hardware Error Status; ``stalled``: answers but never moves; ``block_at``: the
-position stops there, as fingers closing on an object) so tests can check that the driver stops a motion
-with a typed error. Every instruction packet received is kept in ``log`` for tests.
+position stops there, as fingers closing on an object; ``block_short``: an obstruction keeps the servo that
+many pulses short of whatever goal it is given, until released) so tests can check that the driver stops a
+motion with a typed error. ``inject``/``release`` change them while the bus runs; an emulator started with a
+``fault_file`` (``FAULT_FILE_ENV`` for one started inside the arm service) re-reads that JSON file whenever it
+changes, so a test or ``objscan bench estop`` in another process can block a joint or silence a servo. Only
+the emulator reads it: nothing on a real bus does. Every instruction packet received is kept in ``log``.
 
 Run it for manual work: ``python -m services.arm.drivers.dynamixel emulate``.
 """
 
 from __future__ import annotations
 
+import json
+import math
 import os
 import pty
 import select
@@ -29,6 +35,7 @@ import tty
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from services.arm.drivers.dynamixel import protocol as p
@@ -53,6 +60,7 @@ class EmulatedServo:
     alert: int = 0  # Hardware Error Status bits (0 = healthy)
     stalled: bool = False  # answers, takes goals, never moves (a blocked or broken joint)
     block_at: int | None = None  # the position cannot pass this value (fingers closed on an object)
+    block_short: int | None = None  # an obstruction: stops this many pulses short of any goal (None: free)
     max_ticks_per_s: float = 0.0  # mechanical speed cap (0 = none), e.g. the gripper's 75 mm/s
     memory: bytearray = field(default_factory=lambda: bytearray(1024))
 
@@ -125,6 +133,11 @@ class EmulatedServo:
         goal = float(self.goal_position)
         if self.block_at is not None and min(self._position, goal) <= self.block_at <= max(self._position, goal):
             goal = float(self.block_at)
+        if self.block_short is not None:  # pushes towards the goal, never gets nearer than block_short
+            d = goal - self._position
+            if abs(d) <= self.block_short:
+                return
+            goal -= math.copysign(self.block_short, d)
         rate = float("inf")
         vel_raw = struct.unpack_from("<I", self.memory, self.table.profile_velocity)[0]
         if vel_raw and self.table is not RH_P12_RN_A:
@@ -171,13 +184,39 @@ def rh_p12_rn_gripper(dxl_id: int = 7, present_position: int = 0) -> EmulatedSer
     )
 
 
+FAULT_FILE_ENV = "OBJSCAN_EMULATED_BUS_FAULTS"
+FAULTS = ("silent", "block_short_rad")
+
+
+def write_faults(path: str | os.PathLike[str], faults: dict) -> None:
+    """Publish ``faults`` (``{id: {"silent": .., "block_short_rad": ..}}``) to an emulator's fault file
+    atomically, so the bus never reads half of it."""
+    from common.atomic import atomic_write_bytes
+
+    atomic_write_bytes(path, json.dumps({str(k): v for k, v in _check_faults(faults).items()}).encode())
+
+
+def _check_faults(faults: dict) -> dict[int, dict]:
+    """``{id: {"silent": bool, "block_short_rad": float | None}}`` with integer IDs; unknown names refused."""
+    out: dict[int, dict] = {}
+    for key, spec in faults.items():
+        if not isinstance(spec, dict) or set(spec) - set(FAULTS):
+            raise ValueError(f"servo {key}: faults are a mapping of {', '.join(FAULTS)}, got {spec!r}")
+        out[int(key)] = spec
+    return out
+
+
 class DynamixelBusEmulator:
     """Servos behind a pty; ``port`` is the device path to open."""
 
-    def __init__(self, servos: list[EmulatedServo] | None = None, tick_s: float = 0.002):
+    def __init__(self, servos: list[EmulatedServo] | None = None, tick_s: float = 0.002,
+                 fault_file: str | os.PathLike[str] | None = None):
         servos = servos if servos is not None else servos_for()
         self.servos = {s.dxl_id: s for s in servos}
         self.tick_s = tick_s
+        self.fault_file = os.fspath(fault_file) if fault_file else None
+        self._fault_mtime: tuple[int, int] | None = None
+        self._fault_checked = 0.0
         self.log: deque[p.Packet] = deque(maxlen=200_000)  # bounded: a long HIL run streams at 100 Hz
         self.crc_errors = 0
         self._lock = threading.Lock()
@@ -224,6 +263,52 @@ class DynamixelBusEmulator:
         with self._lock:
             self.servos[dxl_id].block_at = position
 
+    def inject(self, dxl_id: int, silent: bool | None = None, block_short_rad: float | None = None) -> None:
+        """Silence ``dxl_id`` (it answers nothing), or put an obstruction ``block_short_rad`` short of any
+        goal it is given; ``release`` undoes both."""
+        with self._lock:
+            s = self.servos[dxl_id]
+            if silent is not None:
+                s.silent = bool(silent)
+            if block_short_rad is not None:
+                s.block_short = int(round(abs(block_short_rad) * s.table.ticks_per_rev / (2 * math.pi)))
+
+    def release(self, dxl_id: int) -> None:
+        """The servo answers again and nothing obstructs it (its goal is unchanged: it moves there now)."""
+        with self._lock:
+            s = self.servos[dxl_id]
+            s.silent, s.block_short = False, None
+
+    def apply_faults(self, faults: dict) -> None:
+        """Make the bus's injected faults exactly ``faults`` (``{id: {"silent": .., "block_short_rad": ..}}``;
+        a servo not named is released)."""
+        wanted = _check_faults(faults)
+        for dxl_id in self.servos:
+            self.release(dxl_id)
+            spec = wanted.get(dxl_id, {})
+            if spec:
+                self.inject(dxl_id, silent=spec.get("silent"), block_short_rad=spec.get("block_short_rad"))
+
+    def _poll_fault_file(self, now: float) -> None:
+        """Every 5 ms at most: when the fault file changed, apply it (a missing file: no faults)."""
+        if self.fault_file is None or now - self._fault_checked < 0.005:
+            return
+        self._fault_checked = now
+        try:
+            st = os.stat(self.fault_file)
+            mtime = (st.st_ino, st.st_mtime_ns)  # a file replaced by rename is a new inode
+        except OSError:
+            mtime = None
+        if mtime == self._fault_mtime:
+            return
+        self._fault_mtime = mtime
+        try:
+            text = "{}" if mtime is None else Path(self.fault_file).read_text() or "{}"
+            faults = json.loads(text)
+            self.apply_faults(faults)
+        except (OSError, ValueError):  # half-written: the next change is read again
+            self._fault_mtime = None
+
     def clear_log(self) -> None:
         with self._lock:
             self.log.clear()
@@ -238,6 +323,7 @@ class DynamixelBusEmulator:
             except (OSError, ValueError):
                 return
             now = time.perf_counter()
+            self._poll_fault_file(now)
             with self._lock:
                 for s in self.servos.values():
                     s.step(now - last)

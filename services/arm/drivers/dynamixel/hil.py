@@ -12,13 +12,15 @@ the robot configuration describes (PAPRAS: DYNAMIXEL-P). ``BusTwinBridge`` plays
   for the emulated gripper servo; then the driver writes the goal over the bus as always, the servo
   stalls at the obstacle and the controller detects the grasp from the stalled position, as on hardware.
 
-At start the bus stands where the twin says the arm is (or at the home posture), like an arm that was
+Faults are injected through the emulator's fault file (``OBJSCAN_EMULATED_BUS_FAULTS``, see
+``emulator.py``). At start the bus stands where the twin says the arm is (or at the home posture), like an arm that was
 switched on where it stood.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import threading
 
 import numpy as np
@@ -29,7 +31,7 @@ from services.arm.drivers.base import ArmDriver
 from services.arm.drivers.dynamixel import protocol as p
 from services.arm.drivers.dynamixel.config import DynamixelConfig
 from services.arm.drivers.dynamixel.driver import DynamixelArmDriver
-from services.arm.drivers.dynamixel.emulator import DynamixelBusEmulator, servos_for
+from services.arm.drivers.dynamixel.emulator import FAULT_FILE_ENV, DynamixelBusEmulator, servos_for
 from services.arm.errors import DriverError
 
 log = logging.getLogger("objscan.arm")
@@ -55,7 +57,9 @@ class BusTwinBridge:
         bus's port path is returned."""
         self.twin.connect()
         q0, opening0 = self.twin.read_joints(), self.twin.read_gripper()
-        self.emulator = DynamixelBusEmulator(servos_for(self.config, q0, opening0)).start()
+        # faults (a blocked joint, a silent servo) come from a file a test or the bench names, if any
+        self.emulator = DynamixelBusEmulator(servos_for(self.config, q0, opening0),
+                                             fault_file=os.environ.get(FAULT_FILE_ENV) or None).start()
         self._last_q = np.asarray(q0, dtype=np.float64)
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="bus-twin-bridge", daemon=True)
@@ -151,8 +155,8 @@ class EmulatedBusDriver(DynamixelArmDriver):
             self.bridge.prepare_gripper(opening_m, force)
         super().set_gripper(opening_m, force)
 
-    def settle(self, q: np.ndarray | None = None) -> np.ndarray:
-        present = super().settle(q)
+    def settle(self, q: np.ndarray | None = None, stop_event: threading.Event | None = None) -> np.ndarray:
+        present = super().settle(q, stop_event)
         self.bridge.flush()
         return present
 
