@@ -103,3 +103,22 @@ def test_reconstruct_into_the_session_folder_keeps_its_model(two_view_session, t
     rep = reconstruct(session, session, threads=1)
     assert rep["model"]["error"]["code"] == "too_few_views"
     assert (session / "model.ply").read_bytes() == b"ply\n"
+
+
+def test_scan_prints_and_records_the_orchestrators_verdict(tmp_path, capsys):
+    """``objscan scan``'s ending, from the orchestrator's final status (which carries ``accepted``/``why``)."""
+    from services.cli.cmd_scan import _summary, _summary_json
+
+    final = {"status": "done", "state": "done", "model": str(tmp_path / "model.ply"), "views": 12, "views_done": 12,
+             "accepted": False, "why": "loop closure 89.80 deg > 5 deg"}
+    assert _summary_json(final, tmp_path, 1.0) == 0
+    captured = capsys.readouterr()
+    doc = json.loads(captured.out)
+    assert doc["accepted"] is False and doc["why"] == final["why"]
+    assert [line for line in captured.err.splitlines() if "NOT accepted" in line] == \
+        ["objscan scan: WARNING: model built but NOT accepted: loop closure 89.80 deg > 5 deg"]
+    assert _summary(final, tmp_path, 1.0) == 0
+    assert "NOT accepted" in capsys.readouterr().err
+    assert _summary_json({**final, "accepted": True, "why": ""}, tmp_path, 1.0) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["accepted"] is True and "NOT accepted" not in captured.err
