@@ -80,7 +80,8 @@ class OutlierOutcome:
         return {d["position"] for d in self.left_out}
 
     def to_json(self) -> dict:
-        return {"consensus_fitness": [round(float(f), 4) for f in self.fitness], "threshold": round(self.threshold, 4),
+        fitness = [None if f != f else round(float(f), 4) for f in self.fitness]  # None: left out (JSON has no NaN)
+        return {"consensus_fitness": fitness, "threshold": round(self.threshold, 4),
                 "outliers": list(self.outliers), "reregistered": self.reregistered, "left_out": self.left_out,
                 "implausible_edges": self.implausible_edges}
 
