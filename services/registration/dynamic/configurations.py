@@ -120,7 +120,8 @@ def shortfalls(outcome: ConfigurationOutcome, criteria: AcceptCriteria) -> list[
     worst = outcome.consistency["min_posed_fitness"]
     if not worst >= criteria.min_posed_fitness:
         fits = outcome.consistency.get("posed_fitness") or []
-        edge = int(min(range(len(fits)), key=lambda i: fits[i])) if fits else None
+        names = outcome.consistency.get("edges") or list(range(len(fits)))  # edge indices when some were left out
+        edge = names[int(min(range(len(fits)), key=lambda i: fits[i]))] if fits else None
         where = f" (edge {edge})" if edge is not None else ""
         out.append(f"posed fitness {worst:.3f}{where} < {criteria.min_posed_fitness:g}")
     return out
