@@ -10,6 +10,7 @@ aligned to it first, as the paper does.
 from __future__ import annotations
 
 import json
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -17,7 +18,9 @@ from typing import Any
 import numpy as np
 
 from common.atomic import atomic_write_bytes
+from common.errors import ObjscanError
 from services.cli.cmd_scan import console
+from services.cli.outcome import FAILED, OK, one_line, print_json, report_error, warn_unaccepted
 
 
 def register(sub) -> None:  # noqa: ANN001
@@ -32,6 +35,8 @@ def register(sub) -> None:  # noqa: ANN001
                    help="threads sharing views and pair jobs when no worker processes run "
                         "(default: one per core; 1: serial)")
     p.add_argument("--gt", help="ground-truth mesh path or HOPE object name, for evaluation")
+    p.add_argument("--json", dest="json_output", action="store_true",
+                   help="print one JSON object (model, accepted, why, accuracy, report, or error) on stdout")
     p.set_defaults(func=run)
 
 
@@ -49,19 +54,27 @@ def ground_truth_points(gt: str, session: Path, n: int = 100_000) -> tuple[np.nd
 
 
 def run(args) -> int:  # noqa: ANN001
+    """Exit 0 when a model was built (accepted or not: an unaccepted one is flagged on stderr and in the
+    JSON), 1 when no model was built (the dynamic stage's error is printed; no accuracy figures)."""
     from services.registration.reconstruct import reconstruct
     from services.registration.static.config import StaticConfig
 
     session, out = Path(args.session), Path(args.out)
     t0 = time.perf_counter()
+    console.quiet = bool(args.json_output)  # stdout is the JSON document only
 
     def progress(info: dict[str, Any]) -> None:
         console.print(" ".join(f"{k}={v}" for k, v in info.items() if not isinstance(v, (dict, list))))
 
-    report = reconstruct(session, out, StaticConfig.for_profile(args.profile), progress=progress, workers=args.workers,
-                         threads=args.threads)
-    model = out / "model.ply"
-    if args.gt and model.is_file():
+    try:
+        report = reconstruct(session, out, StaticConfig.for_profile(args.profile), progress=progress,
+                             workers=args.workers, threads=args.threads)
+    except ObjscanError as exc:
+        return report_error("reconstruct", exc, as_json=args.json_output)
+    figures = report.get("model") if isinstance(report.get("model"), dict) else None
+    built = figures is not None and "error" not in figures and figures.get("ply") is not None
+    model = out / str(figures["ply"]) if built else None  # this run's model, never a file left by an earlier one
+    if args.gt and model is not None:
         import open3d as o3d
 
         from services.registration.evaluation import evaluate_model
@@ -73,11 +86,23 @@ def run(args) -> int:  # noqa: ANN001
         report["accuracy"]["gt_posed_from_session"] = posed
     report["seconds_total"] = round(time.perf_counter() - t0, 3)
     atomic_write_bytes(out / "report.json", json.dumps(report, indent=2, default=float).encode())
+    if model is None:
+        err = (figures or {}).get("error") or {"code": "no_model", "message": "no model was built", "detail": {}}
+        print(one_line(f"objscan reconstruct: no model: {err['message']} [{err['code']}]"), file=sys.stderr)
+        if args.json_output:
+            print_json({"error": err, "accepted": False, "why": report.get("why", ""),
+                        "report": str(out / "report.json")})
+        return FAILED
     acc = report.get("accuracy", {})
-    console.print(f"model: {model if model.is_file() else 'not built'}; {report['seconds_total']:.1f} s"
+    console.print(f"model: {model}; {report['seconds_total']:.1f} s"
                   + (f"; chamfer {acc['chamfer_mm']:.3f} mm, F@2mm {acc.get('fscore_2mm', 0):.3f}" if acc else ""))
     fc = report.get("focal_calibration")
     if fc and fc.get("applied"):
         console.print(f"intrinsics: fx, fy self-calibrated at import (x {fc['scale']:.4f}, fx {fc['fx_after']}): "
                       f"{fc['reason']}")
-    return 0 if model.is_file() else 1
+    warn_unaccepted("reconstruct", report)
+    if args.json_output:
+        print_json({"model": str(model), "accepted": bool(report.get("accepted", True)), "why": report.get("why", ""),
+                    "views_left_out": figures.get("views_left_out", []), "accuracy": acc or None,
+                    "seconds": report["seconds_total"], "report": str(out / "report.json")})
+    return OK

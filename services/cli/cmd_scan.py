@@ -41,7 +41,7 @@ from common.messages import Ok, Request
 from common.zenoh_config import DEFAULT_ROUTER_PORT, free_tcp_port
 from services.cell import SERVICE_MODULES, cell_specs, needs_twin
 from services.cli.cells import add_network_args, remote_session, session_name
-from services.cli.outcome import USAGE, one_line, print_json, report_error
+from services.cli.outcome import USAGE, one_line, print_json, report_error, warn_unaccepted
 from services.cli.stop import StopOnInterrupt
 from services.live import add_live_args, live_requested, open_live_view
 from services.private_cell import DEFAULT_GRACE_S, PrivateCell, cell_lock_path, find_cell, start_cell
@@ -322,6 +322,9 @@ def _summary_json(final: dict[str, Any], session_dir: Path, seconds: float) -> i
            "model": final.get("model"), "accuracy": final.get("accuracy"), "views": final.get("views"),
            "views_done": final.get("views_done"), "seconds": round(seconds, 1),
            "report": str(session_dir / "report.json")}
+    if final.get("accepted") is not None:
+        doc["accepted"], doc["why"] = bool(final["accepted"]), final.get("why") or ""
+        warn_unaccepted("scan", final)
     if status != "done":
         doc["error"] = final.get("last_error") or {"code": status or "unknown", "message": "scan did not finish"}
     print_json(doc)
@@ -337,6 +340,7 @@ def _summary(final: dict[str, Any], session_dir: Path, seconds: float, resume_ar
             console.print("accuracy against ground truth: " + ", ".join(
                 f"{k} {v:.3f}" for k, v in acc.items()))
         console.print(f"report: {session_dir / 'report.json'}")
+        warn_unaccepted("scan", final)
         return 0
     err = final.get("last_error") or {}
     console.print(f"[red]{status}[/red] in state {final.get('state')}: {json.dumps(err)}")

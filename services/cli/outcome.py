@@ -1,6 +1,9 @@
 """How a command ends, for people and for scripts: exit codes, one-line errors, ``--json`` output.
 
-Every command returns 0 on success. A failure is one line on stderr (``objscan status: no Zenoh router
+Every command returns 0 on success. A model that was built but not accepted by the dynamic stage's own
+checks is still a success (exit 0): the command prints one warning line on stderr and records
+``accepted: false`` with ``why`` in its JSON output and ``report.json`` (``warn_unaccepted``).
+A failure is one line on stderr (``objscan status: no Zenoh router
 answers at tcp/127.0.0.1:7447 [no_router]``) and, under ``--json``, one JSON object on stdout
 (``{"error": {"code", "message", "detail"}}``), so a script can branch on the code without parsing text.
 The full traceback goes to the log at debug level (``objscan --debug ...`` or ``OBJSCAN_LOG_LEVEL=debug``).
@@ -60,6 +63,19 @@ def report_error(command: str, exc: BaseException, *, as_json: bool) -> int:
     if as_json:
         print(json.dumps({"error": err}, default=str))
     return exit_code(exc)
+
+
+def warn_unaccepted(command: str, result: dict[str, Any]) -> bool:
+    """One line on stderr when ``result`` holds a model that was built but not accepted; True if so.
+
+    Why a warning and not a failure: the model is written and may still be useful to a person, but a script
+    must not take it as good; ``accepted`` in the JSON output and in ``report.json`` says the same.
+    """
+    if result.get("accepted") is not False:
+        return False
+    why = result.get("why") or "see report.json"
+    print(one_line(f"objscan {command}: WARNING: model built but NOT accepted: {why}"), file=sys.stderr)
+    return True
 
 
 def print_json(data: Any) -> None:

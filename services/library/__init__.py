@@ -7,11 +7,11 @@
 See docs/library.md.
 """
 
-from services.library.errors import BadModelInput, LibraryError, ModelNotFound
+from services.library.errors import BadModelInput, LibraryError, ModelNotFound, UnacceptedModel
 from services.library.matching import FindConfig, Match
 from services.library.metadata import ModelMetadata
 from services.library.session import add_session_model, session_metadata
 from services.library.store import ModelEntry, ModelLibrary, ReconcileReport
 
 __all__ = ["BadModelInput", "FindConfig", "LibraryError", "Match", "ModelEntry", "ModelLibrary", "ModelMetadata",
-           "ModelNotFound", "ReconcileReport", "add_session_model", "session_metadata"]
+           "ModelNotFound", "ReconcileReport", "UnacceptedModel", "add_session_model", "session_metadata"]

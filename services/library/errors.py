@@ -21,3 +21,11 @@ class BadModelInput(LibraryError):
     """What was given to store or match is unusable: empty or NaN cloud, wrong shape, bad metadata."""
 
     code = "bad_model"
+
+
+class UnacceptedModel(LibraryError):
+    """The model was built but not accepted by the dynamic stage's own checks (``accepted: false``): the
+    library keeps only models it can match against, unless the caller takes it explicitly
+    (``allow_unaccepted=True``)."""
+
+    code = "model_not_accepted"

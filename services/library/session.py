@@ -32,6 +32,10 @@ def session_metadata(session_dir: str | Path) -> ModelMetadata:
     journal = _json(session / "journal.json")
     figures = report.get("model_figures") or (report.get("model") if isinstance(report.get("model"), dict) else {})
     quality: dict[str, Any] = {"points": report.get("points", figures.get("points"))}
+    accepted = report.get("accepted", figures.get("accepted"))  # reports written before the verdict have none
+    if accepted is not None:
+        quality["accepted"] = bool(accepted)
+        quality["why"] = report.get("why", figures.get("why", ""))
     for key in ("configuration", "reason", "loop_closure", "consistency", "voxel_mm"):
         if key in figures:
             quality[key] = figures[key]
@@ -54,10 +58,11 @@ def session_metadata(session_dir: str | Path) -> ModelMetadata:
                "views": len(info.get("views", [])), "model_sha256": sha256_file(model)})
 
 
-def add_session_model(library_root: str | Path, session_dir: str | Path) -> str:
+def add_session_model(library_root: str | Path, session_dir: str | Path, *, allow_unaccepted: bool = False) -> str:
     """Add ``session_dir/model.ply`` (with ``mesh.ply`` when the session has one) to the library; returns its id.
 
-    Idempotent per (session, model file): a second call returns the id stored the first time.
+    Idempotent per (session, model file): a second call returns the id stored the first time. A model whose
+    report says ``accepted: false`` is refused (``UnacceptedModel``) unless ``allow_unaccepted``.
     """
     lib = ModelLibrary(library_root)
     meta = session_metadata(session_dir)
@@ -67,7 +72,8 @@ def add_session_model(library_root: str | Path, session_dir: str | Path) -> str:
             return entry.id
     session = Path(session_dir)
     mesh = session / "mesh.ply"
-    return lib.add(session / "model.ply", meta, mesh=mesh if mesh.is_file() else None)
+    return lib.add(session / "model.ply", meta, mesh=mesh if mesh.is_file() else None,
+                   allow_unaccepted=allow_unaccepted)
 
 
 def _json(path: Path) -> dict[str, Any]:

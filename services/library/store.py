@@ -60,7 +60,7 @@ from common.atomic import atomic_write_bytes, atomic_write_with, fsync_dir, fsyn
 from common.messages import PointCloud
 from common.session_folder import json_default
 from services.library.descriptors import DescriptorConfig, check_xyz, model_descriptors
-from services.library.errors import BadModelInput, LibraryError, ModelNotFound
+from services.library.errors import BadModelInput, LibraryError, ModelNotFound, UnacceptedModel
 from services.library.matching import find as find_matches
 from services.library.metadata import ModelMetadata, slug
 from services.registration.cloud import CloudError, to_o3d
@@ -160,14 +160,21 @@ class ModelLibrary:
 
     # ------------------------------------------------------------------------------------------ public
     def add(self, model_ply: ModelInput, metadata: ModelMetadata | dict[str, Any], *,
-            mesh: str | Path | o3d.geometry.TriangleMesh | None = None) -> str:
+            mesh: str | Path | o3d.geometry.TriangleMesh | None = None, allow_unaccepted: bool = False) -> str:
         """Store a model (a PLY path, a wire ``PointCloud``, an Open3D cloud or an (N, 3) array); returns its id.
 
         The GOOD descriptors are computed here (whole model + synthetic views) and the whole-model one is
-        copied into ``metadata.descriptor``. Raises ``BadModelInput`` for an empty, NaN or unreadable model.
+        copied into ``metadata.descriptor``. Raises ``BadModelInput`` for an empty, NaN or unreadable model,
+        and ``UnacceptedModel`` for one whose ``metadata.quality["accepted"]`` is ``False`` (the dynamic stage
+        did not accept it) unless ``allow_unaccepted``: a wrong model in the library would be matched against.
         """
         meta = metadata if isinstance(metadata, ModelMetadata) else ModelMetadata.from_dict(metadata)
         meta.validate()
+        if meta.quality.get("accepted") is False and not allow_unaccepted:
+            raise UnacceptedModel(f"model of {meta.object_name!r} was not accepted "
+                                  f"({meta.quality.get('why') or 'see its report'}); pass allow_unaccepted=True "
+                                  "to store it anyway",
+                                  detail={"session": meta.session, "why": meta.quality.get("why")})
         pcd = _load_cloud(model_ply)
         mesh_obj = _load_mesh(mesh) if mesh is not None else None
         desc = model_descriptors(np.asarray(pcd.points), self.descriptor_config)

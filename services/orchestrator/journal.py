@@ -72,6 +72,8 @@ class Journal:
     model_path: str | None = None
     model_ready_s_after_last_view: float | None = None
     accuracy: dict[str, float] | None = None
+    model_accepted: bool | None = None  # the dynamic stage's verdict on the model (None until built)
+    model_why: str = ""  # the acceptance criteria an unaccepted model misses
     library_entry: Any = None
     version: int = JOURNAL_VERSION  # always the current one once loaded: it is written in the new form
     extra: dict[str, Any] = field(default_factory=dict)  # keys a newer or older writer added: kept, not used

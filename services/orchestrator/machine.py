@@ -152,6 +152,7 @@ class Acquisition:
                 "rescans": self.j.counters.rescans, "last_error": self.j.error,
                 "session": str(self.store.path), "elapsed_s": round(time.time() - self.j.started, 1),
                 "model": self.j.model_path, "accuracy": self.j.accuracy,
+                "accepted": self.j.model_accepted, "why": self.j.model_why,
                 "turns_deg": list(self.j.turns_deg)}  # cumulative commanded turn per view (the live view)
 
     def _persist(self) -> None:
@@ -738,7 +739,10 @@ class Acquisition:
         if last_scan.is_file():  # the model's lateness: from the last view's last scan saved to the model saved
             self.j.model_ready_s_after_last_view = round(path.stat().st_mtime - last_scan.stat().st_mtime, 2)
         self.j.model_path = str(path)
-        report: dict[str, Any] = {"model": str(path), "points": len(result.cloud), "model_figures": result.figures,
+        self.j.model_accepted = bool(result.figures.get("accepted", True))
+        self.j.model_why = str(result.figures.get("why", ""))
+        report: dict[str, Any] = {"model": str(path), "accepted": self.j.model_accepted, "why": self.j.model_why,
+                                  "points": len(result.cloud), "model_figures": result.figures,
                                   "turns_commanded_deg": turns, "incremental": self.config.incremental,
                                   "model_ready_s_after_last_view": self.j.model_ready_s_after_last_view}
         if self.config.evaluate and self.j.simulated:
@@ -746,7 +750,8 @@ class Acquisition:
             self.j.accuracy = {k: report["accuracy"][k] for k in ("chamfer_mm", "accuracy_mm", "completeness_mm",
                                                                       "fscore_2mm", "fscore_5mm")
                                   if k in report["accuracy"]}
-        self.decide("model built", points=len(result.cloud), accuracy=self.j.accuracy)
+        self.decide("model built" if self.j.model_accepted else "model built, NOT accepted",
+                    points=len(result.cloud), accuracy=self.j.accuracy, why=self.j.model_why)
         report.update({"session": str(self.store.path), "config": self.j.config, "counters": self.j.counters.to_dict(),
                        "timings_s": self.j.timings_s, "seconds_total": round(time.time() - self.j.started, 2),
                        "decisions": self.j.decisions,

@@ -64,6 +64,7 @@ def reconstruct(
     cfg = (config or StaticConfig()).with_accuracy(accuracy if accuracy_source == "session" else None)
     out = Path(out_dir)
     (out / "views").mkdir(parents=True, exist_ok=True)
+    remove_stale_results(out, session.path)
     t_start, cpu_start = time.perf_counter(), time.process_time()
     views_report: list[dict[str, Any]] = []
     results: dict[int, StaticViewResult] = {}
@@ -105,6 +106,25 @@ def reconstruct(
                                             config=dynamic)
     atomic_write_json(out / "report.json", report)
     return report
+
+
+def remove_stale_results(out: Path, session_path: Path) -> list[Path]:
+    """Remove the result files an earlier run left in ``out`` (``model.ply``, ``views/view_KK.ply``).
+
+    Why: a run whose dynamic stage fails writes no model, and an old ``model.ply`` beside the new report would
+    be read (evaluated, added to a library) as this run's. Not done when ``out`` is the session folder itself:
+    there ``model.ply`` is the acquisition's own model, acquired data that a failed re-run must not lose (the
+    new model replaces it atomically when the run succeeds).
+    """
+    if out.resolve() == Path(session_path).resolve():
+        return []
+    stale = [out / "model.ply", *sorted((out / "views").glob("view_*.ply"))]
+    removed = []
+    for path in stale:
+        if path.is_file():
+            path.unlink()
+            removed.append(path)
+    return removed
 
 
 def default_workers() -> int:
@@ -206,6 +226,9 @@ def run_dynamic_stage(
 
     Views are taken in index order with their commanded cumulative turns; fewer than 3 usable views
     (or a dynamic-stage error) is reported in the returned figures, not raised, like a failed view.
+    ``report["accepted"]`` / ``report["why"]`` carry the model's verdict (``False`` when no model was built).
+    The session's stated turn accuracy (``turn_accuracy_deg`` in ``session.json``, 1 sigma) sets the window
+    beyond which a view correction is implausible (``outliers.py``).
     """
     t0 = time.perf_counter()
     order = sorted(results)
@@ -214,12 +237,17 @@ def run_dynamic_stage(
     cfg = config or DynamicConfig()
     if cfg.pair.turn_only is None:  # a fixed camera sees one table: every view differs by a turn (pair.py)
         cfg = replace(cfg, pair=replace(cfg.pair, turn_only=session.data.get("camera") == "fixed"))
+    sigma = session.data.get("turn_accuracy_deg")
+    if config is None and isinstance(sigma, (int, float)) and sigma > 0:
+        cfg = replace(cfg, outliers=replace(cfg.outliers, turn_sigma_deg=float(sigma)))
     try:
         model = build_model(views, cfg, map_pairs=map_pairs, progress=say)
     except ObjscanError as exc:
+        report["accepted"], report["why"] = False, f"no model: {exc.message} [{exc.code}]"
         return {"error": {"code": exc.code, "message": exc.message, "detail": exc.detail},
                 "views_used": order, "seconds": round(time.perf_counter() - t0, 4)}
     ply = model.write_ply(Path(out_dir) / "model.ply")
+    report["accepted"], report["why"] = model.accepted, model.why
     figures = model.to_json()
     figures.update({"ply": str(ply.relative_to(out_dir)), "views_used": order, "turn_only": cfg.pair.turn_only,
                     "seconds": round(time.perf_counter() - t0, 4)})

@@ -76,6 +76,14 @@ def render_html(session: SessionData, cfg: ReportConfig = ReportConfig()) -> str
 
 
 # ------------------------------------------------------------------------------------------------ sections
+def _verdict(s: SessionData) -> str | None:
+    """The dynamic stage's verdict on the model: "yes", "NO: <why>", or None for a report without one."""
+    accepted = s.report.get("accepted", s.model_figures.get("accepted"))
+    if accepted is None:
+        return None
+    return "yes" if accepted else f"NO: {s.report.get('why') or s.model_figures.get('why') or 'see report.json'}"
+
+
 def _summary(s: SessionData) -> str:
     cfg = s.info.get("config") or s.journal.get("config") or {}
     acc = s.accuracy or {}
@@ -84,6 +92,8 @@ def _summary(s: SessionData) -> str:
             ("views", f"{sum(1 for v in s.views if v.object_cloud is not None)} registered of {len(s.views)}"),
             ("model points", s.report.get("points", s.model_figures.get("points"))),
             ("configuration", s.model_figures.get("configuration")),
+            ("model accepted", _verdict(s)),
+            ("views left out", ", ".join(str(v) for v in s.model_figures.get("views_left_out") or []) or None),
             ("chamfer", _mm(acc.get("chamfer_mm"))), ("total time", _sec(s.report.get("seconds_total"))),
             ("simulated", "yes" if s.simulated else "no")]
     err = s.journal.get("error")

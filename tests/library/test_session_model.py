@@ -51,3 +51,39 @@ def test_session_without_model_is_a_typed_error(tmp_path):
     with pytest.raises(BadModelInput) as exc:
         add_session_model(tmp_path / "lib", tmp_path / "s")
     assert exc.value.code == "no_model"
+
+
+def _copy_with_verdict(session, tmp_path, accepted: bool, where: str):
+    """A copy of the session whose report carries the dynamic stage's verdict (top level or in the figures)."""
+    import shutil
+
+    dest = tmp_path / f"session_{accepted}_{where}"
+    shutil.copytree(session, dest)
+    report = json.loads((dest / "report.json").read_text())
+    verdict = {"accepted": accepted, "why": "" if accepted else "loop closure 89.80 deg > 5 deg"}
+    if where == "top":
+        report.update(verdict)
+    else:
+        report["model_figures"].update(verdict)
+    (dest / "report.json").write_text(json.dumps(report))
+    return dest
+
+
+@pytest.mark.parametrize("where", ["top", "figures"])
+def test_an_unaccepted_model_is_refused_unless_allowed(session, tmp_path, where):
+    from services.library import UnacceptedModel
+
+    bad = _copy_with_verdict(session, tmp_path, False, where)
+    root = tmp_path / "models"
+    with pytest.raises(UnacceptedModel) as exc:
+        add_session_model(root, bad)
+    assert exc.value.code == "model_not_accepted" and "loop closure" in exc.value.message
+    assert len(ModelLibrary(root)) == 0  # nothing stored
+    entry = ModelLibrary(root).get(add_session_model(root, bad, allow_unaccepted=True))
+    assert entry.metadata.quality["accepted"] is False and "loop closure" in entry.metadata.quality["why"]
+
+
+def test_an_accepted_model_is_stored_with_its_verdict(session, tmp_path):
+    good = _copy_with_verdict(session, tmp_path, True, "top")
+    entry = ModelLibrary(tmp_path / "models").get(add_session_model(tmp_path / "models", good))
+    assert entry.metadata.quality["accepted"] is True

@@ -162,3 +162,15 @@ def test_not_a_session_is_a_typed_error(tmp_path):
     with pytest.raises(ReportError) as exc:
         build_report(tmp_path / "nothing")
     assert exc.value.code == "bad_session"
+
+
+def test_an_unaccepted_model_is_flagged_in_the_summary(session, tmp_path):
+    flagged = tmp_path / "flagged"
+    shutil.copytree(session, flagged)
+    report = json.loads((flagged / "report.json").read_text())
+    report.update({"accepted": False, "why": "loop closure 89.80 deg > 5 deg"})
+    report["model_figures"]["views_left_out"] = [5]
+    (flagged / "report.json").write_text(json.dumps(report))
+    page = build_report(flagged, tmp_path / "out" / "r.html").read_text()
+    assert "NO: loop closure 89.80 deg &gt; 5 deg" in page
+    assert re.search(r"<th>views left out</th><td>5</td>", page)

@@ -17,9 +17,13 @@ is high; ``all`` runs all four and takes the best score. Either way the reason i
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from services.registration.dynamic.combine import CombineResult
 from services.registration.dynamic.pair import PairResult
+
+if TYPE_CHECKING:
+    from services.registration.dynamic.outliers import OutlierOutcome
 
 # name -> (regions, crop), cheapest first (the staged order)
 CONFIGURATIONS: dict[str, tuple[bool, bool]] = {
@@ -37,6 +41,8 @@ class AcceptCriteria:
     max_loop_rotation_deg: float = 5.0  # 12 edges of ~0.5-1° error each add up to a few degrees
     max_loop_translation_mm: float = 5.0
     min_posed_fitness: float = 0.6
+    # a view left out opens a 60-degree gap; two still leave every side seen, more is not a full model
+    max_views_left_out: int = 2
 
 
 @dataclass
@@ -51,6 +57,14 @@ class ConfigurationOutcome:
     seconds: float
     score: float = 0.0
     extra: dict = field(default_factory=dict)
+    outliers: OutlierOutcome | None = None  # the disagreeing-view check (outliers.py), when it ran
+
+    @property
+    def loop_waived(self) -> bool:
+        """The loop composition runs through an edge or a view that was set aside: it cannot judge the poses,
+        the posed fitness of every edge (and each view against the others) does."""
+        o = self.outliers
+        return o is not None and bool(o.outliers or o.implausible_edges)
 
     def summary(self) -> dict:
         return {"score": self.score, "loop_rotation_deg": self.loop["rotation_deg"],
@@ -60,24 +74,57 @@ class ConfigurationOutcome:
                 "min_posed_fitness": self.consistency["min_posed_fitness"],
                 "mean_posed_rmse_mm": self.consistency["mean_posed_rmse_mm"],
                 "combine": self.combined.method, "dropped_edge": self.combined.dropped_edge,
+                "views_left_out": [d["view"] for d in self.outliers.left_out] if self.outliers else [],
                 "paths": [r.path for r in self.results], "seconds": self.seconds}
 
 
-def consistency_score(loop: dict, consistency: dict) -> float:
+def consistency_score(loop: dict, consistency: dict, outliers: OutlierOutcome | None = None) -> float:
     """Higher is better: posed fitness (mean and worst) minus loop-closure penalties.
 
-    Scale: 1° of loop rotation or 5 mm of loop displacement costs as much as 0.02 of fitness.
+    Scale: 1° of loop rotation or 5 mm of loop displacement costs as much as 0.02 of fitness. When the loop
+    runs through an edge or view set aside (``ConfigurationOutcome.loop_waived``) it is not counted; each
+    view left out costs 0.1 instead (a model with every view is preferred when it is as consistent).
     """
+    waived = outliers is not None and bool(outliers.outliers or outliers.implausible_edges)
     rot = loop["rotation_deg"] if loop["rotation_deg"] == loop["rotation_deg"] else 180.0
     trans = loop["translation_mm"] if loop["translation_mm"] == loop["translation_mm"] else 1000.0
-    return (0.5 * consistency["mean_posed_fitness"] + 0.5 * consistency["min_posed_fitness"]
-            - 0.02 * rot - 0.004 * trans)
+    penalty = 0.1 * len(outliers.left_out) if waived else 0.02 * rot + 0.004 * trans
+    return 0.5 * consistency["mean_posed_fitness"] + 0.5 * consistency["min_posed_fitness"] - penalty
 
 
 def acceptable(outcome: ConfigurationOutcome, criteria: AcceptCriteria) -> bool:
-    return (outcome.loop["rotation_deg"] <= criteria.max_loop_rotation_deg
-            and outcome.loop["translation_mm"] <= criteria.max_loop_translation_mm
-            and outcome.consistency["min_posed_fitness"] >= criteria.min_posed_fitness)
+    return not shortfalls(outcome, criteria)
+
+
+def shortfalls(outcome: ConfigurationOutcome, criteria: AcceptCriteria) -> list[str]:
+    """Which acceptance criteria ``outcome`` misses, in words (empty: accepted).
+
+    This is the ``why`` of an unaccepted model: a person reading the report sees which figure failed.
+    A NaN loop figure (a loop that could not be composed) fails its criterion.
+    """
+    out = []
+    rot, trans = outcome.loop["rotation_deg"], outcome.loop["translation_mm"]
+    if not outcome.loop_waived:
+        if not rot <= criteria.max_loop_rotation_deg:
+            out.append(f"loop closure {rot:.2f} deg > {criteria.max_loop_rotation_deg:g} deg")
+        if not trans <= criteria.max_loop_translation_mm:
+            out.append(f"loop closure {trans:.1f} mm > {criteria.max_loop_translation_mm:g} mm")
+    else:
+        o = outcome.outliers
+        left = [d["view"] for d in o.left_out]
+        if len(left) > criteria.max_views_left_out:
+            out.append(f"{len(left)} views left out ({left}) > {criteria.max_views_left_out}")
+        kept = [f for f in o.fitness if f == f]
+        if kept and min(kept) < criteria.min_posed_fitness:
+            out.append(f"a kept view fits the others at {min(kept):.3f} < {criteria.min_posed_fitness:g}")
+    worst = outcome.consistency["min_posed_fitness"]
+    if not worst >= criteria.min_posed_fitness:
+        fits = outcome.consistency.get("posed_fitness") or []
+        names = outcome.consistency.get("edges") or list(range(len(fits)))  # edge indices when some were left out
+        edge = names[int(min(range(len(fits)), key=lambda i: fits[i]))] if fits else None
+        where = f" (edge {edge})" if edge is not None else ""
+        out.append(f"posed fitness {worst:.3f}{where} < {criteria.min_posed_fitness:g}")
+    return out
 
 
 def describe(outcome: ConfigurationOutcome) -> str:

@@ -27,8 +27,10 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 
+from common.atomic import atomic_write_with
 from services.registration.dynamic.combine import (
     CombineConfig,
+    chain_poses,
     combine_paper,
     loop_closure_error,
     pairwise_consistency,
@@ -39,6 +41,12 @@ from services.registration.dynamic.configurations import (
     ConfigurationOutcome,
     choose,
     consistency_score,
+    shortfalls,
+)
+from services.registration.dynamic.outliers import (
+    OutlierConfig,
+    handle_outlier_views,
+    implausible_edges,
 )
 from services.registration.dynamic.pair import PairConfig, PairJob, PairResult, job_fingerprint, register_pair
 from services.registration.dynamic.preprocess import (
@@ -76,6 +84,7 @@ class DynamicConfig:
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
     combine: CombineConfig = field(default_factory=CombineConfig)
     accept: AcceptCriteria = field(default_factory=AcceptCriteria)
+    outliers: OutlierConfig = field(default_factory=OutlierConfig)
     model_voxel: float = 0.001
 
     @classmethod
@@ -107,6 +116,10 @@ class RegisteredModel:
     candidates: dict
     timings: dict
     voxel: float
+    accepted: bool = True
+    why: str = ""  # the acceptance criteria the model misses, in words (empty when accepted)
+    outliers: dict = field(default_factory=dict)  # the disagreeing-view check (outliers.py)
+    views_left_out: list[int] = field(default_factory=list)  # view indices not fused into the model
 
     def __len__(self) -> int:
         return int(self.xyz.shape[0])
@@ -115,18 +128,24 @@ class RegisteredModel:
         return Cloud(self.xyz, self.rgb, self.normals).to_o3d()
 
     def write_ply(self, path: str | Path) -> Path:
-        """Binary PLY with colors and normals."""
+        """Binary PLY with colors and normals, written atomically: a reader sees the old model or this one."""
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        if not o3d.io.write_point_cloud(str(path), self.to_o3d(), write_ascii=False):
-            raise DynamicRegistrationError("could not write model PLY", code="io_error", detail={"path": str(path)})
+        try:
+            atomic_write_with(path, lambda tmp: o3d.io.write_point_cloud(str(tmp), self.to_o3d(), write_ascii=False))
+        except OSError as exc:
+            raise DynamicRegistrationError("could not write model PLY", code="io_error",
+                                           detail={"path": str(path), "error": str(exc)}) from None
         return path
 
     def to_json(self) -> dict:
         """JSON-able report: configuration and why, per-edge figures, loop closure, timings."""
         return {
+            "accepted": self.accepted,
+            "why": self.why,
             "configuration": self.configuration,
             "reason": self.reason,
+            "views_left_out": list(self.views_left_out),
+            "outlier_views": self.outliers,
             "combine": self.combine_method,
             "dropped_edge": self.dropped_edge,
             "points": len(self),
@@ -316,18 +335,46 @@ def run_configurations(prep: Prepared, names: list[str], config: DynamicConfig,
 
 def _finish_configuration(prep: Prepared, name: str, config: DynamicConfig,
                           results: list[PairResult]) -> ConfigurationOutcome:
-    """Combination, loop closure and consistency of one configuration's pair results."""
+    """Combination, loop closure, the disagreeing-view check and consistency of one configuration's pairs.
+
+    An edge whose correction the turn accuracy cannot explain is kept out of the combination (when the other
+    edges still connect every view); the posed fitness then judges it. Views that disagree with the others
+    are re-registered or left out (``outliers.py``); the consistency figures are those of the views kept.
+    """
+    oc = config.outliers
+    implausible = implausible_edges(results, oc) if oc.enabled else []
+    combine_on = _without_edges(len(prep.views), results, {e["edge"] for e in implausible})
     if config.combine.method == "pose_graph":
-        combined = optimise_pose_graph(prep, results, config.combine)
+        combined = optimise_pose_graph(prep, combine_on, config.combine)
     elif config.combine.method == "paper":
-        combined = combine_paper(prep, results, config.combine)
+        combined = combine_paper(prep, combine_on, config.combine)
     else:
         raise DynamicRegistrationError(f"unknown combine method {config.combine.method!r}", code="bad_value")
     loop = loop_closure_error(results, prep.center)
-    consistency = pairwise_consistency(prep, combined.poses, results, config.combine)
-    out = ConfigurationOutcome(name, results, combined, loop, consistency, 0.0)
-    out.score = consistency_score(loop, consistency)
+    handled = handle_outlier_views(prep, combined.poses, results, oc, implausible) if oc.enabled else None
+    judged = results
+    if handled is not None:
+        combined.poses = handled.poses
+        left = handled.left_out_positions
+        judged = [r for r in results if r.source_view not in left and r.target_view not in left] or results
+    consistency = pairwise_consistency(prep, combined.poses, judged, config.combine)
+    if len(judged) != len(results):
+        consistency["edges"] = [r.index for r in judged]
+    out = ConfigurationOutcome(name, results, combined, loop, consistency, 0.0, outliers=handled)
+    out.score = consistency_score(loop, consistency, handled)
     return out
+
+
+def _without_edges(n_views: int, results: list[PairResult], drop: set[int]) -> list[PairResult]:
+    """``results`` without the ``drop`` edges, or all of them when the rest would not connect every view."""
+    if not drop:
+        return results
+    kept = [r for r in results if r.index not in drop]
+    try:
+        chain_poses(n_views, kept)
+    except DynamicRegistrationError:
+        return results
+    return kept
 
 
 def fuse(views: list[DynamicView], T_model_view: list[np.ndarray], voxel: float) -> Cloud:
@@ -372,9 +419,12 @@ def build_model(views: list[DynamicView], config: DynamicConfig | None = None,
         chosen, reason = outcomes[0], f"fixed by configuration ({cfg.configuration})"
     else:
         chosen, reason = choose(outcomes, cfg.accept, staged)
+    misses = shortfalls(chosen, cfg.accept)
     t_fuse = time.perf_counter()
     T_model_view = [P @ pv.T_stack_view for P, pv in zip(chosen.combined.poses, prep.views, strict=True)]
-    model = fuse(views, T_model_view, cfg.model_voxel)
+    left = chosen.outliers.left_out_positions if chosen.outliers is not None else set()
+    fused = [k for k in range(len(views)) if k not in left]
+    model = fuse([views[k] for k in fused], [T_model_view[k] for k in fused], cfg.model_voxel)
     timings = {"preprocess_s": prep.seconds,
                **{f"{o.name}_s": o.seconds for o in outcomes},
                "fuse_s": time.perf_counter() - t_fuse, "total_s": time.perf_counter() - t0,
@@ -383,4 +433,6 @@ def build_model(views: list[DynamicView], config: DynamicConfig | None = None,
     return RegisteredModel(model.xyz, model.rgb, model.normals, T_model_view, chosen.results, chosen.loop,
                            chosen.consistency, chosen.name, reason, chosen.combined.method,
                            chosen.combined.dropped_edge, {o.name: o.summary() for o in outcomes}, timings,
-                           cfg.model_voxel)
+                           cfg.model_voxel, accepted=not misses, why="; ".join(misses),
+                           outliers=chosen.outliers.to_json() if chosen.outliers is not None else {},
+                           views_left_out=[views[k].index for k in sorted(left)])

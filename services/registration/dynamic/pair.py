@@ -41,7 +41,7 @@ from scipy.spatial import cKDTree
 
 from common.geometry import rotation_about_line, yaw_deg_about
 from services.registration.blocks import ColorICPConfig, colored_icp, overlap_only
-from services.registration.dynamic.global_registration import global_register
+from services.registration.dynamic.global_registration import GlobalRegistrationConfig, global_register
 from services.registration.dynamic.preprocess import Cloud
 from services.registration.dynamic.turn4dof import TurnSearchConfig, chroma, project_to_turn, search_turn
 from services.registration.dynamic.views import DynamicRegistrationError
@@ -327,11 +327,18 @@ def _gicp(s: o3d.geometry.PointCloud, t: o3d.geometry.PointCloud, max_corr: floa
     return np.asarray(r.transformation) if r.fitness > 0 and np.isfinite(r.transformation).all() else T
 
 
+#: The dynamic stage's global search stops after its base count only, never on a clock: a time budget makes
+#: the result depend on the machine's load (fewer bases tried on a busy machine, another pose found), and the
+#: same session must give the same model on every run. 4PCS's base count (``default_max_bases``) bounds it.
+DETERMINISTIC_GLOBAL = GlobalRegistrationConfig(fourpcs_max_time_s=float("inf"))
+
+
 def global_align(source: Cloud, target: Cloud, voxel: float, overlap: float, seed: int,
                  method: str = "auto") -> tuple[np.ndarray, float, str]:
-    """Global registration behind one call: (T, score, method used); ``auto`` is 4PCS."""
+    """Global registration behind one call: (T, score, method used); ``auto`` is 4PCS (seeded, no time limit)."""
     m = "4pcs" if method == "auto" else method
-    res = global_register(source.xyz, target.xyz, method=m, voxel=voxel, overlap=overlap, seed=seed)
+    res = global_register(source.xyz, target.xyz, method=m, voxel=voxel, overlap=overlap, seed=seed,
+                          config=DETERMINISTIC_GLOBAL)
     return np.asarray(res.T, dtype=float), float(res.lcp_score), m
 
 

@@ -14,6 +14,7 @@ import open3d as o3d
 from services.registration.dynamic.combine import CombineConfig, CombineResult, chain_poses
 from services.registration.dynamic.pair import PairResult
 from services.registration.dynamic.preprocess import Prepared
+from services.registration.dynamic.views import DynamicRegistrationError
 
 reg = o3d.pipelines.registration
 
@@ -22,7 +23,10 @@ def build_pose_graph(prep: Prepared, results: list[PairResult], cfg: CombineConf
     """Nodes initialised by chaining the sequential edges; one edge per pair result."""
     n = len(prep.views)
     loop_edges = {r.index for r in results if abs(r.source_view - r.target_view) != 1}
-    poses = chain_poses(n, results, skip=loop_edges)
+    try:
+        poses = chain_poses(n, results, skip=loop_edges)
+    except DynamicRegistrationError:  # a neighbour edge was left out (implausible): the loop edge connects
+        poses = chain_poses(n, results)
     graph = reg.PoseGraph()
     for P in poses:
         graph.nodes.append(reg.PoseGraphNode(P))
