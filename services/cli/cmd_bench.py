@@ -36,7 +36,7 @@ def register(sub) -> None:  # noqa: ANN001
 
 def _arm_options(module, args) -> dict:  # noqa: ANN001
     """``--arm-backend``/``--emulate-bus`` for a benchmark whose ``run`` takes them; refused for others."""
-    wanted = {k: v for k, v in (("arm_backend", args.arm_backend), ("emulate_bus", args.emulate_bus)) if v}
+    wanted = {k: v for k in ("arm_backend", "emulate_bus") if (v := getattr(args, k, None))}
     accepted = inspect.signature(module.run).parameters
     refused = [k for k in wanted if k not in accepted]
     if refused:
