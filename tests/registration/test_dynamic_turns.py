@@ -98,3 +98,41 @@ def test_a_cylinder_whose_views_are_stacked_is_not_accepted(cylinder_scan):
     assert report["consistency"]["min_posed_fitness"] > 0.6  # ... which fits itself
     assert model.accepted is False and report["accepted"] is False
     assert "do not go round the object once" in report["why"], report["why"]
+
+
+def test_the_axis_of_a_body_of_revolution_is_fitted_and_a_box_is_not_one(tmp_path):
+    from bench.harsh_set import shape_mesh
+    from services.registration.dynamic.revolution import fit_revolution, is_revolution
+
+    axis_point = np.array([0.41, -0.07, 0.0])
+    for name, expected in (("cylinder", True), ("bottle", True), ("box", False)):
+        mesh = shape_mesh(name)
+        mesh.compute_vertex_normals()
+        pcd = mesh.sample_points_uniformly(20_000, use_triangle_normal=True)
+        xyz, nrm = np.asarray(pcd.points), np.asarray(pcd.normals)
+        c = 0.5 * (xyz.min(axis=0) + xyz.max(axis=0))
+        xyz = xyz - [c[0], c[1], 0.0] + axis_point
+        side = xyz[:, 0] < axis_point[0] + 0.005  # a partial view: one side, seen from -x
+        # the estimated centre (the visible side's centroid) lies off the object's own axis
+        fit = fit_revolution(xyz[side], nrm[side], Z, xyz[side].mean(axis=0))
+        assert is_revolution(fit) is expected, (name, fit)
+        if expected:
+            assert np.linalg.norm(fit.point[:2] - axis_point[:2]) < 0.002, (name, fit.point)
+
+
+@pytest.mark.slow
+def test_a_cylinder_takes_its_turn_from_the_prior_and_matches_the_true_pose_fusion(cylinder_scan):
+    from bench.synthetic import oracle_poses
+    from services.registration.dynamic.model import DynamicConfig, build_model, fuse
+    from services.registration.evaluation import evaluate_model
+
+    model = build_model(cylinder_scan.views, DynamicConfig())
+    report = model.to_json()
+    assert all(e["yaw_from_prior"] for e in report["edges"]), [e["yaw_from_prior"] for e in report["edges"]]
+    assert report["accepted"] is True, report["why"]
+    assert abs(report["consistency"]["turns"]["total_correction_deg"]) < 30.0
+    gt = cylinder_scan.gt_points_view0(60_000)
+    fig = evaluate_model(model.xyz, gt, align=True, init_T=np.eye(4))
+    views = cylinder_scan.views
+    floor = evaluate_model(fuse(views, oracle_poses(views, gt), model.voxel).xyz, gt, align=True, init_T=np.eye(4))
+    assert fig["chamfer_mm"] <= 1.3 * floor["chamfer_mm"], (fig["chamfer_mm"], floor["chamfer_mm"])
