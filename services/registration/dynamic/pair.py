@@ -544,6 +544,11 @@ def _yaw_from_prior(job: PairJob, cfg: PairConfig, scorer: _Scorer, T: np.ndarra
         return None
     off = yaw_deg_about(job.axis, np.asarray(T)[:3, :3] @ np.asarray(job.prior)[:3, :3].T)
     T2 = scorer.refit_shift(rotation_about_line(job.axis, point, np.radians(-off)) @ T)
+    if rc.polish:  # tilt and shift once more where the views now overlap, the yaw put back to the prior's
+        s, t = _down(job.source, cfg.fast_voxels[-1]), _down(job.target, cfg.fast_voxels[-1])
+        T3 = _point_to_plane(s, t, cfg.fast_voxels[-1], T2, cfg.icp_iterations)
+        back = yaw_deg_about(job.axis, T3[:3, :3] @ np.asarray(job.prior)[:3, :3].T)
+        T2 = scorer.refit_shift(rotation_about_line(job.axis, point, np.radians(-back)) @ T3)
     return T2, {"registered_yaw_from_prior_deg": round(off, 2), "colour_rise": [round(r, 4) for r in rises],
                 "on_surface": [round(fit.on_surface, 4) for fit in fits]}
 

@@ -34,6 +34,7 @@ class RevolutionConfig:
     min_on_surface: float = 0.9  # share of the points that must fit it
     probe_deg: float = 15.0  # the colour test: the pair turned this much either way about the fitted axis ...
     max_colour_rise: float = 0.02  # ... changes the mean chromaticity difference by no more than this
+    polish: bool = True  # after the turn: one point-to-plane pass for tilt and shift, its yaw put back
 
 
 @dataclass
