@@ -363,7 +363,7 @@ def _finish_configuration(prep: Prepared, name: str, config: DynamicConfig,
         consistency["edges"] = [r.index for r in judged]
     left_out = handled.left_out_positions if handled is not None else set()
     turns = check_turns(combined.poses, prep.axis, [k for k in range(len(prep.views)) if k not in left_out],
-                        oc.turn_sigma_deg, config.accept.turn_sigmas)
+                        oc.turn_sigma_deg, config.accept.turn_sigmas, [v.index for v in prep.views])
     consistency["turns"] = turns.to_json()
     out = ConfigurationOutcome(name, results, combined, loop, consistency, 0.0, outliers=handled, turns=turns)
     out.score = consistency_score(loop, consistency, handled)

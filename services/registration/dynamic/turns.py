@@ -45,10 +45,12 @@ def _wrap(deg: float) -> float:
 
 
 def check_turns(poses: list[np.ndarray], axis: np.ndarray, kept: list[int], sigma_deg: float,
-                sigmas: float) -> TurnCheck:
+                sigmas: float, names: list[int] | None = None) -> TurnCheck:
     """Judge the model's turns: ``poses[k]`` is view k's pose in the pre-rotated frames (the commanded turn
-    already undone, so its yaw about ``axis`` is the view's turn error); ``kept`` the positions fused."""
+    already undone, so its yaw about ``axis`` is the view's turn error); ``kept`` the positions fused;
+    ``names`` the view index at each position (default: the position)."""
     kept = sorted(kept)
+    name = (lambda k: names[k]) if names is not None else (lambda k: k)
     if len(kept) < 2:
         return TurnCheck([], [], 0.0, [])
     R0 = np.asarray(poses[kept[0]])[:3, :3]
@@ -59,7 +61,7 @@ def check_turns(poses: list[np.ndarray], axis: np.ndarray, kept: list[int], sigm
         e = _wrap(b - a)
         window = sigmas * sigma_deg * float(np.sqrt(j - i))
         total += e
-        edges.append({"from": i, "to": j, "correction_deg": round(e, 2), "window_deg": round(window, 2)})
+        edges.append({"from": name(i), "to": name(j), "correction_deg": round(e, 2), "window_deg": round(window, 2)})
     off = [e for e in edges if abs(e["correction_deg"]) > e["window_deg"]]
     if off:
         worst = max(off, key=lambda e: abs(e["correction_deg"]) / e["window_deg"])
