@@ -165,6 +165,8 @@ class SessionStore:
         data = {"version": 1, "object": config.get("object"), "profile": config.get("profile"),
                 "seed": config.get("seed"), "config": config,
                 "views": [{"index": k, "commanded_turn_deg": float(turns_deg[k])} for k in range(views_done)]}
+        if isinstance(config.get("turn_accuracy_deg"), (int, float)):  # the turn accuracy the cell stated
+            data["turn_accuracy_deg"] = float(config["turn_accuracy_deg"])
         data.update(extra or {})
         write_session(self.path, data)
 

@@ -24,6 +24,7 @@ Every number is a field of ``ErrorProfile``; ``get_profile(name, **overrides)`` 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, fields, replace
+from math import erf
 
 import numpy as np
 
@@ -96,6 +97,25 @@ class ErrorProfile:
         mm = np.sqrt(rms_uniform(self.scan_pose_mm) ** 2 + jitter_mm**2 + self.hand_eye_mm**2)
         deg = np.sqrt(rms_uniform(self.scan_pose_deg) ** 2 + jitter_deg**2 + self.hand_eye_deg**2)
         return PoseAccuracy(position_sigma_mm=round(float(mm), 3), orientation_sigma_deg=round(float(deg), 4))
+
+    def turn_accuracy_deg(self, commanded_deg: float = 30.0) -> float:
+        """One sigma of a turn's error (achieved minus commanded yaw, degrees) this profile draws, the twin's
+        counterpart of what a turntable or an arm states, so the dynamic stage can tell a real turn error from a
+        model whose views are stacked: the root mean square of the gain error on a ``commanded_deg`` turn
+        (gain uniform in its range), of the clipped scatter, of the bounces (their chance times their spread)
+        and of the grasp pivot, and the camera's own orientation error on the two views, added in quadrature."""
+        lo, hi = ((g - 1.0) * commanded_deg for g in self.turn_gain_range)
+        gain2 = (lo * lo + lo * hi + hi * hi) / 3.0
+        s, clip = self.turn_sigma_deg, self.turn_clip_deg
+        if s > 0 and clip is not None:  # variance of N(0, s) clipped to +-clip
+            z = clip / s
+            inside = s * s * (erf(z / np.sqrt(2.0)) - 2.0 * z * np.exp(-0.5 * z * z) / np.sqrt(2.0 * np.pi))
+            scatter2 = inside + clip * clip * (1.0 - erf(z / np.sqrt(2.0)))
+        else:
+            scatter2 = s * s
+        bounce2 = self.bounce_prob * self.bounce_sigma_deg**2
+        camera2 = 2.0 * self.pose_accuracy().orientation_sigma_deg ** 2
+        return round(float(np.sqrt(gain2 + scatter2 + bounce2 + self.grasp_pivot_sigma_deg**2 + camera2)), 3)
 
     # -- draws ----------------------------------------------------------------------------------------
     def draw_hand_eye_error(self, rng: np.random.Generator) -> np.ndarray:

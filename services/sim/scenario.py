@@ -180,6 +180,7 @@ def write_session(directory: str | Path, views: list[list[RGBDFrame]], *, extra:
             "source": "sim", "views": entries, "ground_truth": {"object_model": first.get("object_model")}}
     if isinstance(first.get("profile"), str) and first["profile"] in PROFILES:  # what the twin's arm states
         data["pose_accuracy"] = PROFILES[first["profile"]].pose_accuracy().to_dict()
+        data["turn_accuracy_deg"] = PROFILES[first["profile"]].turn_accuracy_deg()
     if extra:
         data.update(extra)
     write_session_json(session, data)

@@ -392,6 +392,7 @@ class World:
                 "object_model": self.object_model(),
                 "profile": self.profile.name,
                 "pose_accuracy": self.profile.pose_accuracy().to_dict(),  # what the twin's arm states
+                "turn_accuracy_deg": self.profile.turn_accuracy_deg(),  # ... and how well it turns the object
                 "physics": self.physics,
                 "seed": self.seed,
                 "attached": self.attached,

@@ -24,6 +24,7 @@ from services.registration.dynamic.pair import PairResult
 
 if TYPE_CHECKING:
     from services.registration.dynamic.outliers import OutlierOutcome
+    from services.registration.dynamic.turns import TurnCheck
 
 # name -> (regions, crop), cheapest first (the staged order)
 CONFIGURATIONS: dict[str, tuple[bool, bool]] = {
@@ -43,6 +44,8 @@ class AcceptCriteria:
     min_posed_fitness: float = 0.6
     # a view left out opens a 60-degree gap; two still leave every side seen, more is not a full model
     max_views_left_out: int = 2
+    # each turn in the model within this many sigmas of the session's turn accuracy (turns.py)
+    turn_sigmas: float = 5.0
 
 
 @dataclass
@@ -58,6 +61,7 @@ class ConfigurationOutcome:
     score: float = 0.0
     extra: dict = field(default_factory=dict)
     outliers: OutlierOutcome | None = None  # the disagreeing-view check (outliers.py), when it ran
+    turns: TurnCheck | None = None  # do the views turn as commanded (turns.py)
 
     @property
     def loop_waived(self) -> bool:
@@ -117,6 +121,8 @@ def shortfalls(outcome: ConfigurationOutcome, criteria: AcceptCriteria) -> list[
         kept = [f for f in o.fitness if f == f]
         if kept and min(kept) < criteria.min_posed_fitness:
             out.append(f"a kept view fits the others at {min(kept):.3f} < {criteria.min_posed_fitness:g}")
+    if outcome.turns is not None:  # whatever else was waived: stacked views fit each other and close the loop
+        out.extend(outcome.turns.misses)
     worst = outcome.consistency["min_posed_fitness"]
     if not worst >= criteria.min_posed_fitness:
         fits = outcome.consistency.get("posed_fitness") or []

@@ -63,6 +63,7 @@ from services.registration.dynamic.preprocess import (
     stacking_frame,
     view_regions,
 )
+from services.registration.dynamic.turns import check_turns
 from services.registration.dynamic.view_graph import optimise_pose_graph
 from services.registration.dynamic.views import DynamicRegistrationError, DynamicView
 
@@ -360,7 +361,11 @@ def _finish_configuration(prep: Prepared, name: str, config: DynamicConfig,
     consistency = pairwise_consistency(prep, combined.poses, judged, config.combine)
     if len(judged) != len(results):
         consistency["edges"] = [r.index for r in judged]
-    out = ConfigurationOutcome(name, results, combined, loop, consistency, 0.0, outliers=handled)
+    left_out = handled.left_out_positions if handled is not None else set()
+    turns = check_turns(combined.poses, prep.axis, [k for k in range(len(prep.views)) if k not in left_out],
+                        oc.turn_sigma_deg, config.accept.turn_sigmas, [v.index for v in prep.views])
+    consistency["turns"] = turns.to_json()
+    out = ConfigurationOutcome(name, results, combined, loop, consistency, 0.0, outliers=handled, turns=turns)
     out.score = consistency_score(loop, consistency, handled)
     return out
 

@@ -43,6 +43,7 @@ from common.geometry import rotation_about_line, yaw_deg_about
 from services.registration.blocks import ColorICPConfig, colored_icp, overlap_only
 from services.registration.dynamic.global_registration import GlobalRegistrationConfig, global_register
 from services.registration.dynamic.preprocess import Cloud
+from services.registration.dynamic.revolution import RevolutionConfig, fit_revolution, is_revolution
 from services.registration.dynamic.turn4dof import TurnSearchConfig, chroma, project_to_turn, search_turn
 from services.registration.dynamic.views import DynamicRegistrationError
 from services.registration.dynamic.yaw_refine import YawRefineConfig, geometry_pins_yaw, refine_yaw
@@ -101,6 +102,8 @@ class PairConfig:
     # session (``reconstruct``: True for a fixed-camera session, False for an arm's).
     turn_only: bool | None = None
     global_margin: float = 0.05  # a 6-DoF result must beat a 4-DoF one by this much score to replace it
+    # a body of revolution whose colours do not tell its turn either: the yaw is the prior's (revolution.py)
+    revolution: RevolutionConfig = field(default_factory=RevolutionConfig)
     # scoring
     eval_voxel: float = 0.002
     fitness_distance: float = 0.003
@@ -164,13 +167,16 @@ class PairResult:
     attempts: int = 0
     color_icp_failures: int = 0
     detail: dict = field(default_factory=dict)
+    # the turn was not observable (a body of revolution, colours the same all round): the yaw is the prior's
+    yaw_from_prior: bool = False
 
     def to_json(self) -> dict:
         return {"index": self.index, "source_view": self.source_view, "target_view": self.target_view,
                 "T": np.asarray(self.T).tolist(), "fitness": self.fitness, "rmse_mm": 1000.0 * self.rmse,
                 "color_fitness": self.color_fitness, "path": self.path, "candidate": self.candidate,
                 "seconds": self.seconds, "attempts": self.attempts,
-                "color_icp_failures": self.color_icp_failures, "detail": self.detail}
+                "color_icp_failures": self.color_icp_failures, "yaw_from_prior": self.yaw_from_prior,
+                "detail": self.detail}
 
 
 # ----------------------------------------------------------------------------------------- scoring
@@ -504,6 +510,10 @@ def _register_fast(job: PairJob, cfg: PairConfig, scorer: _Scorer) -> PairResult
                 path, margin = "global", 0.0
         _, T, name, (f, rmse, cf) = best
     detail: dict = {"tried": tried}
+    from_prior = _yaw_from_prior(job, cfg, scorer, T)
+    if from_prior is not None:
+        T, detail["yaw_from_prior"] = from_prior
+        f, rmse, cf = scorer(T)
     if cfg.turn_only and path != "global":  # a global result means the object was re-seated: keep its tilt
         # the 4-DoF transform nearest the 6-DoF fit (its yaw, the centre where it moves it). A 4-DoF ICP
         # (``refine_turn``) instead left the castard loop at 3.0 deg (its point-to-point rows pull the yaw on
@@ -512,7 +522,35 @@ def _register_fast(job: PairJob, cfg: PairConfig, scorer: _Scorer) -> PairResult
         T = project_to_turn(T, job.axis, job.center)
         f, rmse, cf = scorer(T)
     return PairResult(job.index, job.source_view, job.target_view, T, f, rmse, cf, path, name, 0.0,
-                      attempts=1, color_icp_failures=fails_total, detail=detail)
+                      attempts=1, color_icp_failures=fails_total, detail=detail,
+                      yaw_from_prior=from_prior is not None)
+
+
+def _yaw_from_prior(job: PairJob, cfg: PairConfig, scorer: _Scorer, T: np.ndarray) -> tuple[np.ndarray, dict] | None:
+    """``T`` turned about the object's fitted axis to the prior's yaw, when neither the shape nor the colours
+    can tell the turn (both views bodies of revolution, the colour difference flat +-``probe_deg`` about that
+    axis); None otherwise. Its tilt and shift are the registration's (the shift re-fitted after the turn)."""
+    rc = cfg.revolution
+    if not rc.enabled:
+        return None
+    fits = [fit_revolution(c.xyz, c.normals, job.axis, job.center, rc) for c in (job.target, job.source)]
+    if not all(is_revolution(fit, rc) for fit in fits):
+        return None
+    point = fits[0].point  # the target's axis: the source, posed by ``T``, lies on the target's surface
+    base = scorer.colour_distance(T)[1]
+    rises = [scorer.colour_distance(scorer.refit_shift(rotation_about_line(job.axis, point, np.radians(d)) @ T))[1]
+             - base for d in (-rc.probe_deg, rc.probe_deg)]
+    if min(rises) > rc.max_colour_rise:  # the colours change both ways: they tell the turn
+        return None
+    off = yaw_deg_about(job.axis, np.asarray(T)[:3, :3] @ np.asarray(job.prior)[:3, :3].T)
+    T2 = scorer.refit_shift(rotation_about_line(job.axis, point, np.radians(-off)) @ T)
+    if rc.polish:  # tilt and shift once more where the views now overlap, the yaw put back to the prior's
+        s, t = _down(job.source, cfg.fast_voxels[-1]), _down(job.target, cfg.fast_voxels[-1])
+        T3 = _point_to_plane(s, t, cfg.fast_voxels[-1], T2, cfg.icp_iterations)
+        back = yaw_deg_about(job.axis, T3[:3, :3] @ np.asarray(job.prior)[:3, :3].T)
+        T2 = scorer.refit_shift(rotation_about_line(job.axis, point, np.radians(-back)) @ T3)
+    return T2, {"registered_yaw_from_prior_deg": round(off, 2), "colour_rise": [round(r, 4) for r in rises],
+                "on_surface": [round(fit.on_surface, 4) for fit in fits]}
 
 
 def _yaw_refined(job: PairJob, cfg: PairConfig, scorer: _Scorer,
