@@ -16,6 +16,7 @@ from common.errors import InvalidRequest
 from common.messages import PointCloud
 from services.registration.dynamic.pair import PairConfig, PairJob, PairResult
 from services.registration.dynamic.preprocess import Cloud
+from services.registration.dynamic.revolution import RevolutionConfig
 from services.registration.dynamic.turn4dof import TurnSearchConfig
 from services.registration.dynamic.views import DynamicRegistrationError
 from services.registration.dynamic.yaw_refine import YawRefineConfig
@@ -55,6 +56,7 @@ class PairResultMessage(Message):
     attempts: int = 0
     color_icp_failures: int = 0
     detail: dict = field(default_factory=dict)
+    yaw_from_prior: bool = False
 
 
 def _cloud_msg(c: Cloud) -> PointCloud:
@@ -99,7 +101,8 @@ def _rebuild(cls: type, d: dict, what: str):  # noqa: ANN202
         raise InvalidRequest(f"bad {what}: {exc}") from None
 
 
-_NESTED: dict[type, dict[str, type]] = {PairConfig: {"turn_search": TurnSearchConfig, "yaw_refine": YawRefineConfig}}
+_NESTED: dict[type, dict[str, type]] = {PairConfig: {"turn_search": TurnSearchConfig, "yaw_refine": YawRefineConfig,
+                                                     "revolution": RevolutionConfig}}
 
 
 def _config(d: dict) -> PairConfig:
@@ -143,14 +146,15 @@ def pair_result_message(r: PairResult) -> PairResultMessage:
                              T=np.asarray(r.T, np.float64), fitness=float(r.fitness), rmse=float(r.rmse),
                              color_fitness=float(r.color_fitness), path=r.path, candidate=r.candidate,
                              seconds=float(r.seconds), attempts=int(r.attempts),
-                             color_icp_failures=int(r.color_icp_failures), detail=_plain(r.detail))
+                             color_icp_failures=int(r.color_icp_failures), detail=_plain(r.detail),
+                             yaw_from_prior=bool(r.yaw_from_prior))
 
 
 def pair_result_from_message(m: PairResultMessage) -> PairResult:
     return PairResult(index=m.index, source_view=m.source_view, target_view=m.target_view, T=np.array(m.T),
                       fitness=m.fitness, rmse=m.rmse, color_fitness=m.color_fitness, path=m.path,
                       candidate=m.candidate, seconds=m.seconds, attempts=m.attempts,
-                      color_icp_failures=m.color_icp_failures, detail=m.detail)
+                      color_icp_failures=m.color_icp_failures, detail=m.detail, yaw_from_prior=m.yaw_from_prior)
 
 
 def pair_record(fingerprint: str, r: PairResult) -> dict:
@@ -159,7 +163,8 @@ def pair_record(fingerprint: str, r: PairResult) -> dict:
             "target_view": r.target_view, "T": np.asarray(r.T, float).tolist(), "fitness": float(r.fitness),
             "rmse": float(r.rmse), "color_fitness": float(r.color_fitness), "path": r.path,
             "candidate": r.candidate, "seconds": float(r.seconds), "attempts": int(r.attempts),
-            "color_icp_failures": int(r.color_icp_failures), "detail": _plain(r.detail)}
+            "color_icp_failures": int(r.color_icp_failures), "detail": _plain(r.detail),
+            "yaw_from_prior": bool(r.yaw_from_prior)}
 
 
 def reuse_records(records: object) -> dict[str, PairResult]:
@@ -180,7 +185,7 @@ def reuse_records(records: object) -> dict[str, PairResult]:
                            rmse=float(d["rmse"]), color_fitness=float(d["color_fitness"]), path=str(d["path"]),
                            candidate=str(d["candidate"]), seconds=float(d["seconds"]),
                            attempts=int(d.get("attempts", 0)), color_icp_failures=int(d.get("color_icp_failures", 0)),
-                           detail=dict(d.get("detail", {})))
+                           detail=dict(d.get("detail", {})), yaw_from_prior=bool(d.get("yaw_from_prior", False)))
         except (KeyError, TypeError, ValueError) as exc:
             raise InvalidRequest(f"reuse_pairs[{i}] is not a pair record: {exc}") from exc
         out[d["fingerprint"]] = r
