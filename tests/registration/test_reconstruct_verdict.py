@@ -51,11 +51,18 @@ def test_an_unaccepted_model_is_flagged_in_json_report_and_on_stderr(four_view_s
     assert report["accepted"] is False and report["why"] == doc["why"]
     assert report["model"]["accepted"] is False and report["model"]["why"] == doc["why"]
     warnings = [line for line in captured.err.splitlines() if "NOT accepted" in line]
-    assert len(warnings) == 1 and doc["why"] in warnings[0]
+    # the console line is one line: a long why is cut there, the JSON and report.json keep it whole
+    assert len(warnings) == 1 and doc["why"][:60] in warnings[0]
 
 
 def test_an_accepted_model_says_so_without_a_warning(four_view_session, tmp_path, monkeypatch, capsys):
+    import services.registration.dynamic.model as model
+    from services.registration.dynamic.turns import TurnCheck
+
     _criteria(monkeypatch, max_loop_rotation_deg=360.0, max_loop_translation_mm=1e6, min_posed_fitness=0.0)
+    # a flat box seen from four sides 90 degrees apart: a turn taken for its 180-degree twin is rightly
+    # flagged by the turn check, relaxed here with the other criteria
+    monkeypatch.setattr(model, "check_turns", lambda *a, **k: TurnCheck([], [], 0.0, []))
     out = tmp_path / "out"
     assert main(["reconstruct", str(four_view_session), "--out", str(out), "--threads", "1", "--json"]) == 0
     captured = capsys.readouterr()
