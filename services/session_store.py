@@ -165,8 +165,9 @@ class SessionStore:
         data = {"version": 1, "object": config.get("object"), "profile": config.get("profile"),
                 "seed": config.get("seed"), "config": config,
                 "views": [{"index": k, "commanded_turn_deg": float(turns_deg[k])} for k in range(views_done)]}
-        if isinstance(config.get("turn_accuracy_deg"), (int, float)):  # the turn accuracy the cell stated
-            data["turn_accuracy_deg"] = float(config["turn_accuracy_deg"])
+        turn_sigma = config.get("turn_accuracy_deg")
+        if isinstance(turn_sigma, (int, float)) and turn_sigma > 0:  # the turn accuracy the cell stated
+            data["turn_accuracy_deg"] = float(turn_sigma)
         data.update(extra or {})
         write_session(self.path, data)
 

@@ -170,6 +170,9 @@ class AcquisitionConfig:
     # registration (a scan correction it cannot explain is not fused) and stored in session.json; empty: the
     # cell states it at start (the twin from its error profile, a real arm from its robot configuration)
     pose_accuracy: dict = field(default_factory=dict)
+    # how well the cell turns the object (1 sigma per turn, degrees; 0: not stated); the twin states it from its
+    # error profile, session.json keeps it, and reconstruct's turn check reads it from there
+    turn_accuracy_deg: float = 0.0
     force_first_slip: bool = False  # sim: the first grasp slips (recovery test)
     # a view whose object height differs from the previous one's by more than max(m, rel * height) means the
     # object toppled at the set-down: the views restart from where it lies, at most this many times
@@ -205,6 +208,7 @@ class AcquisitionConfig:
                 PoseAccuracy.from_dict(self.pose_accuracy)
             except PoseAccuracyError as exc:
                 raise _fail("pose_accuracy", exc.message, self.pose_accuracy) from exc
+        _number("turn_accuracy_deg", self.turn_accuracy_deg, 0.0, 180.0)
         _flag("force_first_slip", self.force_first_slip)
         _flag("evaluate", self.evaluate)
         x, y = _numbers("workspace_center", self.workspace_center, -2.0, 2.0, length=2)

@@ -269,7 +269,8 @@ class Acquisition:
                 self._state_pose_accuracy(state.get("pose_accuracy"))
                 turn_sigma = state.get("turn_accuracy_deg")
                 if isinstance(turn_sigma, (int, float)) and turn_sigma > 0:  # session.json keeps it (reconstruct)
-                    self.j.config["turn_accuracy_deg"] = float(turn_sigma)
+                    self.config.turn_accuracy_deg = float(turn_sigma)
+                    self.j.config["turn_accuracy_deg"] = self.config.turn_accuracy_deg
                 if self.config.force_first_slip:
                     await self.cell.sim("force_slip")
             except ObjscanError as exc:

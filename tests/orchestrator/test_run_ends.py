@@ -50,3 +50,21 @@ def test_a_failure_before_the_first_state_ends_the_session_failed(tmp_path, erro
     assert "move/home" in cell.asked  # parked (each park step tried even though each failed)
     journal = json.loads((tmp_path / "journal.json").read_text())
     assert journal["status"] == "failed" and journal["error"]["code"] == code
+
+
+class StatingTwinCell(RefusingCell):
+    """A twin that states its pose and turn accuracy at reset, then refuses the first gripper command."""
+
+    async def sim(self, op: str, **kw):  # noqa: ANN003, ANN201
+        self.asked.append(f"sim/{op}")
+        return {"pose_accuracy": {"position_sigma_mm": 3.0, "orientation_sigma_deg": 1.0}, "turn_accuracy_deg": 4.2}
+
+
+def test_a_session_whose_twin_stated_its_turn_accuracy_can_be_resumed(tmp_path):
+    cell = StatingTwinCell(RemoteError("another motion is running", code="busy"))
+    acq = Acquisition(cell, SessionStore(tmp_path), AcquisitionConfig(views=3))  # type: ignore[arg-type]
+    assert asyncio.run(asyncio.wait_for(acq.run(), 30))["status"] == "failed"
+    journal = json.loads((tmp_path / "journal.json").read_text())
+    resumed = AcquisitionConfig.from_dict(journal["config"])  # what a resuming orchestrator does
+    assert resumed.turn_accuracy_deg == 4.2
+    assert resumed.pose_accuracy == {"position_sigma_mm": 3.0, "orientation_sigma_deg": 1.0}
