@@ -343,19 +343,49 @@ class Acquisition:
                 await self.cell.move("home", speed=0.6)
             except RemoteError as exc:
                 self.decide("could not go home before choosing scan poses", code=exc.code)
-        reasons = []
-        for candidate in scan_pose_candidates(center, height, self.config.scan):
-            try:
-                for T in candidate:
-                    await self.cell.move("pose", target=T, frame="camera", dry_run=True)
-            except RemoteError as exc:
-                reasons.append(exc.code)
-                continue
+        candidate, reasons = await self._first_reachable_scan_set(center, height)
+        if candidate is not None:
             self.j.scan_sets[key] = [T.tolist() for T in candidate]
             return candidate
         raise AcquisitionFailed(f"view {view}: no reachable set of scan poses around the object; "
                                 f"limit: {name_scan_pose_limit(reasons)}",
                                 detail={"center": center.tolist(), "reasons": reasons[:6], "limit": "reach"})
+
+    async def _first_reachable_scan_set(self, center: np.ndarray, height: float, start_q: np.ndarray | None = None
+                                        ) -> tuple[list[np.ndarray] | None, list[str]]:
+        """The first candidate set of scan poses around an object at ``center`` whose every pose the arm
+        reaches (dry runs, from ``start_q`` when given, else from the current posture), and the refusals."""
+        reasons: list[str] = []
+        for candidate in scan_pose_candidates(center, height, self.config.scan):
+            try:
+                for T in candidate:
+                    await self.cell.move("pose", target=T, q=start_q, frame="camera", dry_run=True)
+            except RemoteError as exc:
+                if exc.code in ("estop_latched", "busy"):
+                    raise
+                reasons.append(exc.code)
+                continue
+            return candidate, reasons
+        return None, reasons
+
+    async def _scannable_spot(self, spot: np.ndarray, height: float, cache: dict[tuple, bool]) -> bool:
+        """Whether the object set down at ``spot`` can be scanned there: a relocated set-down that leaves no
+        reachable set of scan poses would end the acquisition at the next view, so such a spot is never
+        chosen. Checked from the home posture, where the next view's scan poses are planned from."""
+        key = tuple(np.round(np.asarray(spot, float)[:2], 3))
+        if key not in cache:
+            try:
+                start_q: np.ndarray | None = np.asarray((await self.cell.move("home", dry_run=True)).q, float)
+            except RemoteError as exc:
+                if exc.code in ("estop_latched", "busy"):
+                    raise
+                start_q = None  # the way home is blocked from here: plan from the current posture instead
+            candidate, reasons = await self._first_reachable_scan_set(np.asarray(spot, float), height, start_q)
+            cache[key] = candidate is not None
+            if candidate is None:
+                self.decide("relocated spot leaves no reachable scan poses", spot=list(key),
+                            limit=name_scan_pose_limit(reasons))
+        return cache[key]
 
     async def scan(self) -> State:
         k = self.view
@@ -575,6 +605,7 @@ class Acquisition:
         direct = self._candidates(view.center, view.height)
         late: list[tuple[int, Grasp, TurnPoses]] = []  # picks that were reachable; the turn or set-down was not
         relocations = 0
+        scannable: dict[tuple, bool] = {}  # relocation spots: can the object be scanned there?
         shifts = relocation_shifts(view.center, cfg.turn.relocation)
         tied = yaw_tied(list(self._plan.grasps)) and bool(shifts)
         fallback: tuple[int, Grasp, TurnPoses, np.ndarray] | None = None  # passed its check, not the look-ahead
@@ -608,6 +639,9 @@ class Acquisition:
                 # the whole pick-turn-place is planned and checked before the hand moves: an attempt that would
                 # stop half-way (a joint limit in the middle of the turn) would leave the object part-turned,
                 # and every later attempt would work on a view that no longer matches it
+                if relocating and not await self._scannable_spot(
+                        view.center + relocation_shift(seq), view.height, scannable):
+                    continue
                 checks += 1
                 relocations += relocating
                 self.j.counters.grasp_checks += 1
