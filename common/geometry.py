@@ -76,7 +76,8 @@ def _apply(M: np.ndarray, t: np.ndarray | None, arr: np.ndarray) -> np.ndarray:
 
     Why not the matmul: an (N, 3) x (3, 3) product goes to BLAS, which handles the thin shape badly and
     spins its threads: 90 ms CPU (470 ms wall on the shared box) for 300k points against 4 ms this way, and
-    a static view transforms ~1M points (issue 15 wall time). Same values to the last bit or one ulp.
+    a static view transforms ~1M points, which dominated ``reconstruct``'s wall
+    time. Same values to the last bit or one ulp.
     """
     p = arr.astype(np.float64, copy=False)
     out = np.empty(p.shape, dtype=np.float64)

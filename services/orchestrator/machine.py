@@ -13,7 +13,8 @@ Recovery, as a robot on a real table needs it:
 - after ``max_rescans`` of one view the arm goes home with the gripper open and the run ends with a reason;
 - an e-stop from anywhere halts the arm at once and parks the machine in ``stopped`` (resumable).
 
-Irreversible steps are journalled before they start and when they end (issue 17 #6, #7): a re-scan writes
+Irreversible steps are journalled before they start and when they end, so a resume after a crash knows what
+already happened: a re-scan writes
 ``pending_rescan`` before it moves the old attempt aside; a turn writes ``turn_intent`` before the gripper
 closes (phase ``closing``), when the object is held (``holding``), and its completion (the new view and its
 commanded turn) right after the release, before the retreat. A resume first settles an open intent with what
@@ -692,7 +693,7 @@ class Acquisition:
         self.j.grasp_mode = "auto"
         return await self._rescan(k, "no executable grasp")
 
-    # ------------------------------------------------------------------------ turn journal (issue 17 #6, #7)
+    # ------------------------------------------------------------------------------------- turn journal
     def _journal_turn_intent(self, phase: str | None, **fields: Any) -> None:
         """Write where a turn stands before the next irreversible step: ``closing`` (the gripper is about
         to close), ``holding`` (the object is held and may be lifted and turned), or ``None`` (over)."""
@@ -725,7 +726,7 @@ class Acquisition:
         self.store.save_journal(self.j.to_dict())
 
     async def _recover_turn(self) -> None:
-        """Settle a turn the previous orchestrator left open, from what the arm reports (issue 17 #6, #7).
+        """Settle a turn the previous orchestrator left open, from what the arm reports.
 
         - at the planned release pose after the object was held: the turn finished, only its record is
           missing; release if still closed and record it (never turn again);

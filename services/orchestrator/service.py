@@ -55,7 +55,8 @@ class OrchestratorService(Service):
         params = msg.params if isinstance(msg, Request) else {}
         if not isinstance(params, dict):
             raise InvalidRequest("run parameters must be a map")
-        # every path is checked against this orchestrator's roots before anything is created (issue 17 #3)
+        # every path is checked against this orchestrator's roots before anything is created, so a request cannot
+        # make the orchestrator write outside the folders it was started with
         library = self._library(params)
         if params.get("resume"):
             path = confine(params["resume"], self.sessions_root, what="resume")
@@ -66,7 +67,7 @@ class OrchestratorService(Service):
             path = confine(out, self.sessions_root, what="out")
             config = AcquisitionConfig.from_dict(params.get("config", {}))  # validated before the folder exists
             store = SessionStore.create(path)
-        store.acquire_lock()  # one orchestrator per session folder (issue 17 #8); released when the run ends
+        store.acquire_lock()  # one orchestrator per session folder; released when the run ends
         try:
             # session recording (docs/recording.md): on unless the run says ``record: false``
             self.current, run = recorded_acquisition(

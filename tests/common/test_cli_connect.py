@@ -1,6 +1,6 @@
 """Every CLI command that talks to a cell honours ``--connect`` (and the TLS variables through it), and a
 remote ``objscan scan`` sends session paths relative to the orchestrator's sessions root, so sessions
-land inside the sessions volume of a compose cell (issue 13 item 6)."""
+land inside the sessions volume of a compose cell."""
 
 from __future__ import annotations
 
