@@ -15,6 +15,10 @@ from typing import Any
 
 from common.errors import InvalidRequest
 from common.pose_accuracy import PoseAccuracy, PoseAccuracyError
+from services.arm.workspace import TABLE_RADIUS_M, table_reach_problem
+
+UP_AXES = ("x", "y", "z", "-x", "-y", "-z")
+"""A mesh's upright axis as the twin takes it (``services/sim/catalogue.py``)."""
 
 
 class ConfigError(InvalidRequest):
@@ -108,8 +112,9 @@ class RelocationConfig:
 
     def __post_init__(self) -> None:
         _flag("turn.relocation.enabled", self.enabled)
-        _number("turn.relocation.near_radius", self.near_radius, 0.25, 0.9)
-        _number("turn.relocation.max_radius", self.max_radius, self.near_radius, 0.9)
+        lo, hi = TABLE_RADIUS_M
+        _number("turn.relocation.near_radius", self.near_radius, lo, hi)
+        _number("turn.relocation.max_radius", self.max_radius, self.near_radius, hi)
         self.azimuths_deg = tuple(_numbers("turn.relocation.azimuths_deg", self.azimuths_deg, -90.0, 90.0))
         _number("turn.relocation.max_checks", self.max_checks, 1, 1000, integer=True)
         _number("turn.relocation.min_shift", self.min_shift, 0.0, 0.5)
@@ -183,6 +188,10 @@ class AcquisitionConfig:
     # pair registrations during the acquisition (services/orchestrator/incremental.py); off: all at the end
     incremental: bool = True
     workspace_center: tuple[float, float] = (0.60, 0.0)  # where the locate pose looks (and the twin puts the object)
+    # the object's mesh as the twin loads it: its file units in metres (0.001 for millimetres) and its upright
+    # axis ("y", "-z", ...); None: the file's own (HOPE: 0.01 and y; any other mesh: 1 and z)
+    object_scale: float | None = None
+    object_up_axis: str | None = None
     scan: ScanGeometry = field(default_factory=ScanGeometry)
     turn: TurnMotion = field(default_factory=TurnMotion)
 
@@ -213,6 +222,13 @@ class AcquisitionConfig:
         _flag("evaluate", self.evaluate)
         x, y = _numbers("workspace_center", self.workspace_center, -2.0, 2.0, length=2)
         self.workspace_center = (x, y)
+        why = table_reach_problem(x, y)
+        if why is not None:
+            raise _fail("workspace_center", f"is out of the arm's reach ({why})", [x, y])
+        if self.object_scale is not None:
+            _number("object_scale", self.object_scale, 0.0, 1000.0, lo_open=True)
+        if self.object_up_axis is not None and self.object_up_axis not in UP_AXES:
+            raise _fail("object_up_axis", f"must be one of {', '.join(UP_AXES)}", self.object_up_axis)
         if not isinstance(self.scan, ScanGeometry):
             raise _fail("scan", "must be a ScanGeometry", self.scan)
         if not isinstance(self.turn, TurnMotion):
