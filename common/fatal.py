@@ -56,16 +56,18 @@ def read_fatal(path: str | Path | None) -> dict[str, Any] | None:
 
 
 def start_error(label: str, returncode: int | None, fatal: dict[str, Any] | None,
-                log: Path | None = None) -> ServiceStartError:
-    """The error for process ``label`` that ended while starting: its own typed error when it wrote one."""
+                log: Path | None = None, *, starting: bool = True) -> ServiceStartError:
+    """The error for process ``label`` that ended (while starting, or later when not ``starting``): its own
+    typed error when it wrote one."""
     detail: dict[str, Any] = {"service": label, "exit_code": returncode}
     if log is not None:
         detail["log"] = str(log)
     if fatal is not None:
-        return ServiceStartError(f"{label} could not start: {fatal['message']}", code=fatal["code"],
-                                 detail={**(fatal.get("detail") or {}), **detail})
+        return ServiceStartError(f"{label} {'could not start' if starting else 'stopped'}: {fatal['message']}",
+                                 code=fatal["code"], detail={**(fatal.get("detail") or {}), **detail})
     where = f"; see {log}" if log is not None else ""
-    return ServiceStartError(f"{label} exited with code {returncode} before it was live{where}", detail=detail)
+    return ServiceStartError(f"{label} exited with code {returncode}{' before it was live' if starting else ''}"
+                             f"{where}", detail=detail)
 
 
 def _plain(detail: Any) -> Any:

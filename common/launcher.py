@@ -103,11 +103,11 @@ class ServiceGroup:
             shutil.rmtree(self._fatal_dir, ignore_errors=True)
             self._fatal_dir = None
 
-    def start_error(self, label: str) -> ServiceStartError:
-        """Why process ``label`` ended while starting: its own typed error when it wrote one."""
+    def start_error(self, label: str, *, starting: bool = True) -> ServiceStartError:
+        """Why process ``label`` ended (while starting, by default): its own typed error when it wrote one."""
         proc = self.procs[label]
         log = self.log_dir / f"{label}.log" if self.log_dir else None
-        return start_error(label, proc.poll(), read_fatal(self.fatal_path(label)), log)
+        return start_error(label, proc.poll(), read_fatal(self.fatal_path(label)), log, starting=starting)
 
     def start_router(self) -> None:
         self.start(ProcessSpec("common.router", ["--listen", self.endpoint], name="router"))

@@ -188,6 +188,8 @@ def run(args) -> int:  # noqa: ANN001
         config = None
     else:  # checked here, before any service starts: a bad file or flag is said at once, naming the key
         config = scan_config(args)
+        if not args.connect and _names_a_file(config.object):  # a remote cell's paths are its own
+            require_path(config.object, "object mesh")
     name = args.resume or args.out or \
         f"sessions/{Path(config.object if config else 'session').stem}-{time.strftime('%Y%m%d-%H%M%S')}"
     if args.connect:  # a remote cell (compose, another machine): its orchestrator owns the sessions folder
@@ -221,6 +223,13 @@ def run(args) -> int:  # noqa: ANN001
         joined = "orchestrator" not in group.procs
         target = session_dir.name if joined and not args.out and not args.resume else str(session_dir)
         return _acquire(group.session, args, config, target, local=True, t0=t0)
+
+
+def _names_a_file(obj: str) -> bool:
+    """Whether ``--object`` names a mesh file or folder (a path, or a mesh file name), not a catalogue name."""
+    from services.sim.catalogue import MESH_SUFFIXES
+
+    return os.sep in obj or Path(obj).suffix.lower() in MESH_SUFFIXES
 
 
 def twin_args(config: AcquisitionConfig) -> list[str]:
