@@ -75,12 +75,14 @@ def load_config_file(path: str | Path) -> dict[str, Any]:
     except (OSError, UnicodeDecodeError) as exc:
         raise BadUsage(f"cannot read config file {path}: {exc}", detail={"path": str(path)}) from None
     except yaml.YAMLError as exc:
-        raise ConfigError(f"config file {path} is not valid YAML: {' '.join(str(exc).split())}",
-                          detail={"path": str(path)}) from None
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
+        why = getattr(exc, "problem", None) or " ".join(str(exc).split())
+        raise ConfigError(f"{path}: not valid YAML ({where}{why})", detail={"path": str(path)}) from None
     if data is None:
         return {}
     if not isinstance(data, dict):
-        raise ConfigError(f"config file {path} must hold a map of config keys, got {type(data).__name__}",
+        raise ConfigError(f"{path}: must hold a map of config keys, got {type(data).__name__}",
                           detail={"path": str(path)})
     return data
 

@@ -74,6 +74,15 @@ def _known_keys(cls: type, data: Any, where: str) -> dict[str, Any]:
     return data
 
 
+def _plain(value: Any) -> Any:
+    """Tuples as lists, all the way down (``yaml.safe_dump`` and JSON write lists only)."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
 @dataclass
 class ScanGeometry:
     """How the 3 scan poses of a view are placed around the object (replacing the paper's fixed poses).
@@ -235,7 +244,8 @@ class AcquisitionConfig:
             raise _fail("turn", "must be a TurnMotion", self.turn)
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        """Plain JSON/YAML values (lists, not tuples): what ``from_dict`` and ``objscan scan --config`` read."""
+        return _plain(asdict(self))
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> AcquisitionConfig:
