@@ -17,7 +17,8 @@ from services.cli.main import build_parser
 
 REPO = Path(__file__).resolve().parents[2]
 MISSING = "/nonexistent/objscan-missing"
-LINE = re.compile(r"objscan(?: (?P<command>[a-z-]+))?: (?P<message>.+) \[(?P<code>[a-z_]+)\]")  # no command: its name was bad
+# no command when the command's own name was the bad usage
+LINE = re.compile(r"objscan(?: (?P<command>[a-z-]+))?: (?P<message>.+) \[(?P<code>[a-z_]+)\]")
 
 
 def objscan(*args: str, cwd: Path, timeout: float = 120) -> subprocess.CompletedProcess[str]:
