@@ -10,7 +10,7 @@ with plain ``async def`` handlers, and calls ``run_service(MyService)`` from its
   ``Error`` reply and the service keeps running;
 - bounds the requests in progress (``max_concurrent``): beyond it a request is answered ``overloaded`` at
   once, undecoded; ``priority`` keys (health, every ``stop``) are never refused, so an e-stop always answers
-  while hostile payloads arrive (issue 17 #9, ``objscan bench estop``); ``inline`` keys (the arm's ``stop``,
+  while hostile payloads arrive (``objscan bench estop``); ``inline`` keys (the arm's ``stop``,
   health) run a plain function the moment the loop reaches their query, ahead of handlers queued before it;
 - answers ``objscan/{service}/{instance}/health`` and holds the liveliness token
   ``objscan/@alive/{service}/{instance}`` for as long as it lives;

@@ -3,7 +3,7 @@
 With no cell running it starts the embedded default (a router on loopback and every service as its own
 process, sim backends) and stops what it started at the end. A cell started by ``objscan scan`` belongs to
 that run (a lock file per port, ``cell_lock_path``): a second ``objscan scan`` on the machine does not join
-it (it would share its orchestrator and status key and be stopped when the first exits, issue 17 #13) but
+it (it would share its orchestrator and status key and be stopped when the first exits) but
 starts a private cell on a free port, unless ``--port`` names the cell to join. ``--resume SESSION_DIR``
 continues a session whose orchestrator was killed, stopped or failed, re-using every frame already captured;
 on a session whose acquisition is still running (its CLI was killed, the private cell went on) it attaches:

@@ -1,9 +1,10 @@
 """What one acquisition is asked to do, with defaults that work on the simulated cell.
 
 Every field is validated when a config is made (``__post_init__``) and ``from_dict`` refuses unknown keys:
-a config arrives over the network in the orchestrator's ``run`` request, and before issue 17 #4
-``views: 3.5`` or NaN left the session ``running`` forever and ``views: 100000000`` blocked the
-orchestrator's event loop. A bad value raises ``ConfigError`` (code ``invalid_config``) naming the field.
+a config arrives over the network in the orchestrator's ``run`` request (and from ``objscan scan --config``),
+and an unchecked ``views: 3.5`` or NaN would leave the session ``running`` forever, ``views: 100000000`` would
+block the orchestrator's event loop. A bad value raises ``ConfigError`` (code ``invalid_config``) naming the
+field; ``workspace_center`` must be within the arm's reach (``services/arm/workspace.py``).
 """
 
 from __future__ import annotations
