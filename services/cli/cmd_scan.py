@@ -358,8 +358,9 @@ def _summary_json(final: dict[str, Any], session_dir: Path, seconds: float) -> i
         warn_unaccepted("scan", final)
     if status != "done":
         doc["error"] = final.get("last_error") or {"code": status or "unknown", "message": "scan did not finish"}
-        print(error_line("scan", f"{status} in state {final.get('state')}: {doc['error'].get('message')}",
-                         str(doc["error"].get("code") or status)), file=sys.stderr)
+        print(error_line("scan", f"{status} in state {doc['error'].get('state') or final.get('state')}: "
+                                 f"{doc['error'].get('message')}", str(doc["error"].get("code") or status)),
+              file=sys.stderr)
     print_json(doc)
     return 0 if status == "done" else 1
 
@@ -376,7 +377,8 @@ def _summary(final: dict[str, Any], session_dir: Path, seconds: float, resume_ar
         warn_unaccepted("scan", final)
         return 0
     err = final.get("last_error") or {}
-    print(error_line("scan", f"{status} in state {final.get('state')}: {err.get('message') or 'scan did not finish'}"
-                             f"; resume with: objscan scan --resume {resume_arg or session_dir}",
-                     str(err.get("code") or status or "failed")), file=sys.stderr)
+    print(error_line("scan", f"{status} in state {err.get('state') or final.get('state')}: "
+                             f"{err.get('message') or 'scan did not finish'}; resume with: objscan scan --resume "
+                             f"{resume_arg or session_dir}", str(err.get("code") or status or "failed")),
+          file=sys.stderr)
     return 1
