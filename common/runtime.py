@@ -41,6 +41,7 @@ from common import keys
 from common.client import DEFAULT_TIMEOUT_S, request
 from common.codec import MAX_PAYLOAD_BYTES, Message, decode
 from common.errors import ObjscanError, WireError
+from common.fatal import write_fatal
 from common.log import event, request_id, setup_logging
 from common.memory import tune_malloc
 from common.messages import Error, Health
@@ -445,7 +446,10 @@ def settings_from_args(args: argparse.Namespace, **options: Any) -> ServiceSetti
 
 
 def run_service(factory: Callable[[], Service]) -> None:
-    """Run a service until SIGINT/SIGTERM; exits non-zero if it failed to start."""
+    """Run a service until SIGINT/SIGTERM; exits non-zero if it failed to start.
+
+    The error that ends the process is logged as one structured line and written where its starter reads it
+    (``$OBJSCAN_FATAL_FILE``, ``common/fatal.py``), typed: the starter reports the service's own code."""
     tune_malloc()
     service = factory()
     limit_open3d_threads(only_if_imported=True)  # after the service's imports: reproducible registrations
@@ -457,4 +461,12 @@ def run_service(factory: Callable[[], Service]) -> None:
             loop.add_signal_handler(sig, service.stop)
         await service.run()
 
-    asyncio.run(main())
+    try:
+        asyncio.run(main())
+    except Exception as exc:
+        # the starter reads why (common/fatal.py): "sim could not start: unknown object ..." in its one line
+        payload = write_fatal(service.name, exc)
+        code = exc.code if isinstance(exc, ObjscanError) else "internal"
+        event(log, "fatal", logging.ERROR, code=code, message=str(getattr(exc, "message", exc))[:300],
+              written=payload or "-")
+        raise

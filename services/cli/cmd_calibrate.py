@@ -24,6 +24,7 @@ from services.calibration.procedure import ProcedureConfig, run_procedure
 from services.cell import hardware_services
 from services.cli.cells import add_network_args, remote_session
 from services.cli.cmd_scan import console, ensure_cell
+from services.cli.outcome import BadUsage
 
 
 def register(sub) -> None:  # noqa: ANN001
@@ -42,7 +43,8 @@ def register(sub) -> None:  # noqa: ANN001
     h.add_argument("--out", default="calibration/hand_eye.json", help="calibration file (default: %(default)s)")
     h.add_argument("--json", metavar="F", help="write the figures (errors against truth, residuals) to F")
     h.add_argument("--port", type=int, default=DEFAULT_ROUTER_PORT, help="router port of a local cell")
-    h.add_argument("--robot", default=keys.DEFAULT_ROBOT)
+    h.add_argument("--robot", default=keys.DEFAULT_ROBOT,
+                   help="robot cell id in the services' keys (default: %(default)s)")
     add_network_args(h)
     h.set_defaults(func=run)
 
@@ -51,16 +53,11 @@ def run(args) -> int:  # noqa: ANN001
     try:
         cfg = ProcedureConfig(views=args.views, board_xy=tuple(args.board_xy), seed=args.seed)
     except ValueError as exc:
-        console.print(f"[red]bad arguments:[/red] {exc}")
-        return 2
+        raise BadUsage(str(exc)) from None
     out = Path(args.out)
     t0 = time.time()
     if args.connect:
-        try:
-            session = remote_session(args.connect, hardware_services(args.backend))
-        except ObjscanError as exc:
-            console.print(f"[red]{exc.message}[/red]")
-            return 1
+        session = remote_session(args.connect, hardware_services(args.backend))
         try:
             return _calibrate(session, args, cfg, out, t0)
         finally:
@@ -78,11 +75,10 @@ def _calibrate(session, args, cfg: ProcedureConfig, out: Path, t0: float) -> int
     console.print(f"calibrating hand-eye over {cfg.views} views of the board at {cfg.board_xy}")
     try:
         res = run_procedure(session, args.robot, cfg)
-    except ObjscanError as exc:
-        console.print(f"[red]calibration failed[/red] [{exc.code}] {exc.message}")
+    except ObjscanError as exc:  # the figures file says so too; the CLI's one line says why
         if args.json:
             atomic_write_json(Path(args.json), {"ok": False, "error": {"code": exc.code, "message": exc.message}})
-        return 1
+        raise ObjscanError(f"calibration failed: {exc.message}", code=exc.code, detail=exc.detail) from exc
     finally:
         try:
             request_sync(session, keys.arm(args.robot, "move"), MoveRequest(kind="home", speed_scale=0.6), timeout=120)

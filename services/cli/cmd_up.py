@@ -16,6 +16,7 @@ from common.launcher import ServiceGroup
 from common.zenoh_config import DEFAULT_ROUTER_PORT
 from services.cell import CELLS, SERVICE_MODULES, cell_specs
 from services.cli.cells import add_network_args, network_settings
+from services.cli.outcome import BadUsage, require_path
 
 
 def register(sub) -> None:  # noqa: ANN001
@@ -30,7 +31,8 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--emulate-bus", action="store_true",
                    help="sim cell with the real DYNAMIXEL driver on an emulated bus driving the twin")
     p.add_argument("--port", type=int, default=DEFAULT_ROUTER_PORT, help="router port (default: %(default)s)")
-    p.add_argument("--only", help=f"comma-separated subset of: {', '.join(SERVICE_MODULES)}")
+    p.add_argument("--only", help=f"start only these services, comma-separated: {', '.join(SERVICE_MODULES)} "
+                                  "(default: all)")
     p.add_argument("--log-dir", default="logs", help="one log file per process (default: %(default)s)")
     add_network_args(p)
     p.set_defaults(func=run)
@@ -43,11 +45,13 @@ def arm_args(args) -> dict[str, list[str]]:  # noqa: ANN001
     if args.robot_config:
         from services.arm.drivers.dynamixel.robot_config import load_robot_config
 
+        require_path(args.robot_config, "robot configuration")
+
         load_robot_config(args.robot_config)
         out += ["--robot-config", str(Path(args.robot_config).resolve())]
     if args.emulate_bus:
         if args.backend != "sim":
-            raise SystemExit("--emulate-bus runs with the sim cell (--backend sim)")
+            raise BadUsage("--emulate-bus runs with the sim cell (--backend sim)")
         out += ["--backend", "dynamixel", "--emulate-bus"]
     return {"arm": out} if out else {}
 
@@ -56,14 +60,10 @@ def run(args) -> int:  # noqa: ANN001
     names = [n for n in args.only.split(",") if n] if args.only else None
     unknown = set(names or []) - set(SERVICE_MODULES)
     if unknown:
-        print(f"unknown services: {', '.join(sorted(unknown))}")
-        return 2
-    try:
-        extra = arm_args(args)
-    except ObjscanError as exc:  # a bad robot configuration: say which key, start nothing
-        print(f"error [{exc.code}]: {exc.message}")
-        return 2
+        raise BadUsage(f"unknown services: {', '.join(sorted(unknown))} (known: {', '.join(SERVICE_MODULES)})")
+    extra = arm_args(args)  # a bad robot configuration says which key (bad input, exit 2), and nothing starts
     stop = threading.Event()
+    failure: ObjscanError | None = None
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     with ServiceGroup(args.port, log_dir=Path(args.log_dir), start_router=not args.connect) as group:
@@ -77,10 +77,12 @@ def run(args) -> int:  # noqa: ANN001
         print("all services live; Ctrl-C to stop. 'objscan status' lists them.")
         while not stop.is_set():
             for label, proc in group.procs.items():
-                if proc.poll() is not None:
-                    print(f"{label} exited with code {proc.returncode}; stopping the cell")
+                if proc.poll() is not None and failure is None:  # said once, as the command's failure, after the stop
+                    failure = group.start_error(label, starting=False)
                     stop.set()
             time.sleep(0.5)
         print("stopping...")
     print("stopped.")
+    if failure is not None:
+        raise ObjscanError(f"the cell stopped: {failure.message}", code=failure.code, detail=failure.detail)
     return 0

@@ -263,9 +263,11 @@ class Acquisition:
         if self.j.simulated is None:
             try:
                 x, y = self.config.workspace_center
+                form = {k: v for k, v in (("scale", self.config.object_scale),
+                                          ("up_axis", self.config.object_up_axis)) if v is not None}
                 state = await self.cell.sim("reset", object=self.config.object, profile=self.config.profile,
                                             seed=self.config.seed, x=float(x), y=float(y),
-                                            physics=self.config.physics)
+                                            physics=self.config.physics, **form)
                 self.j.simulated = True
                 self._state_pose_accuracy(state.get("pose_accuracy"))
                 turn_sigma = state.get("turn_accuracy_deg")
