@@ -105,6 +105,13 @@ class Ros2Face(Service):
         if self.hand_eye is not None:
             await self._publish_static(self.hand_eye.T_gripper_camera, time.time(), "calibrated")
 
+    def zenoh_config(self) -> zenoh.Config:
+        """Timestamps on: a transient-local publisher's cache orders its samples by them (rmw_zenoh's sessions
+        enable them too)."""
+        conf = super().zenoh_config()
+        conf.insert_json5("timestamping/enabled", '{"router": true, "peer": true, "client": true}')
+        return conf
+
     # ------------------------------------------------------------------ declarations
     def _declare_topic(self, name: str, ros_type: str, qos: rmw.QoS, entity_id: int) -> _Topic:
         assert self.session is not None
