@@ -33,33 +33,19 @@ import numpy as np
 import zenoh
 
 from common import keys
-from common.api import ViewResult
 from common.codec import Message
 from common.errors import ObjscanError
 from common.geometry import invert
 from common.log import event
 from common.messages import JointState, Ok, Request
 from common.runtime import Service, run_service, service_arg_parser, settings_from_args
-from services.live import scene
 from services.live.tap import tap_key
-from services.ros2 import convert, rmw, types
+from services.ros2 import rmw, topics, types
 
 log = logging.getLogger("objscan.ros2")
 
 NODE = "objscan"
 
-# topic -> (type, QoS); RELIABLE + KEEP_LAST as rmw_zenoh's publishers use (congestion control DROP)
-TOPICS: dict[str, tuple[str, rmw.QoS]] = {
-    "/joint_states": ("sensor_msgs/msg/JointState", rmw.QoS(depth=10)),
-    "/tf": ("tf2_msgs/msg/TFMessage", rmw.QoS(depth=100)),
-    "/tf_static": ("tf2_msgs/msg/TFMessage", rmw.QoS(durability=rmw.TRANSIENT_LOCAL, depth=1)),
-    "/objscan/camera/color/image_raw": ("sensor_msgs/msg/Image", rmw.QoS(depth=5)),
-    "/objscan/camera/depth/image_rect_raw": ("sensor_msgs/msg/Image", rmw.QoS(depth=5)),
-    "/objscan/camera/color/camera_info": ("sensor_msgs/msg/CameraInfo", rmw.QoS(depth=5)),
-    "/objscan/view_cloud": ("sensor_msgs/msg/PointCloud2", rmw.QoS(depth=5)),
-    "/objscan/model": ("sensor_msgs/msg/PointCloud2", rmw.QoS(durability=rmw.TRANSIENT_LOCAL, depth=1)),
-    "/objscan/status": ("std_msgs/msg/String", rmw.QoS(depth=10)),
-}
 SERVICES: dict[str, str] = {"/objscan/start_scan": types.TRIGGER, "/objscan/stop_scan": types.TRIGGER}
 SERVICE_QOS = rmw.QoS(depth=10)
 
@@ -87,14 +73,13 @@ class Ros2Face(Service):
         self.hand_eye = o.get("hand_eye")  # HandEyeCalibration | None
         assert self.session is not None
         self.zid = str(self.session.zid())
-        self.scene = scene.SceneInterpreter(state_rate_hz=0.0)
         self.static_sent = False
         self.published: dict[str, int] = {}
         self._put_lock = threading.Lock()  # the loop and the executor both publish: one sequence per topic
         liveliness = self.session.liveliness()
         self._declared.append(liveliness.declare_token(rmw.node_token(self.domain, self.zid, 0, "/", NODE)))
         self.topics: dict[str, _Topic] = {}
-        for i, (name, (ros_type, qos)) in enumerate(TOPICS.items()):
+        for i, (name, (ros_type, qos)) in enumerate(topics.TOPICS.items()):
             self.topics[name] = self._declare_topic(name, ros_type, qos, entity_id=10 + i)
         for j, (name, srv_type) in enumerate(SERVICES.items()):
             self._declare_service(name, srv_type, entity_id=100 + j)
@@ -162,9 +147,7 @@ class Ros2Face(Service):
         await self.run_cpu(work)
 
     async def _publish_static(self, T_gripper_camera: np.ndarray, t: float, source: str) -> None:
-        self._put("/tf_static", convert.tf_message(
-            [convert.transform_stamped(T_gripper_camera, convert.GRIPPER, convert.CAMERA, t, self.distro)],
-            self.distro))
+        self._put(*topics.static_camera(T_gripper_camera, t, self.distro))
         self.static_sent = True
         event(log, "tf_static published", source=source)
 
@@ -181,49 +164,27 @@ class Ros2Face(Service):
     async def _on_state(self, msg: Message) -> None:
         if not isinstance(msg, JointState):
             return
-        t = float(msg.stamp) or time.time()
-        self._put("/joint_states", convert.joint_state(msg.names, msg.position, t, msg.velocity, msg.effort,
-                                                       self.distro))
-        if msg.T_base_gripper is not None:
-            self._put("/tf", convert.tf_message(
-                [convert.transform_stamped(msg.T_base_gripper, convert.BASE, convert.GRIPPER, t, self.distro)],
-                self.distro))
-            if not self.static_sent and msg.T_base_camera is not None:  # no calibration file: the nominal mount
-                await self._publish_static(invert(msg.T_base_gripper) @ msg.T_base_camera, t, "nominal")
+        for name, ros in topics.of_state(msg, self.distro):
+            self._put(name, ros)
+        if not self.static_sent and msg.T_base_gripper is not None and msg.T_base_camera is not None:
+            # no calibration file: the mount the arm reports (its URDF's)
+            await self._publish_static(invert(msg.T_base_gripper) @ msg.T_base_camera, float(msg.stamp), "nominal")
 
     async def _on_status(self, msg: Message) -> None:
-        if isinstance(msg, Ok) and "state" in msg.info:
-            self._put("/objscan/status", convert.status_text(dict(msg.info), self.distro))
+        for name, ros in topics.of_status(msg, self.distro):
+            self._put(name, ros)
 
     async def _on_tap(self, msg: Message) -> None:
         if not isinstance(msg, Request):
             return
         p = msg.params
         t = float(p.get("t_received", time.time()))
-        request, reply = p.get("request"), p.get("reply")
-        d = self.distro
-        items: list[tuple[str, Any]] = []
-        for ev in self.scene.exchange(t, str(p.get("key")), request, reply):
-            if isinstance(ev, scene.CameraFrame):
-                f = ev.frame
-                ts = float(f.stamp) or t
-                items += [("/objscan/camera/color/image_raw", convert.color_image(f.color, ts, distro=d)),
-                          ("/objscan/camera/depth/image_rect_raw",
-                           convert.depth_image(f.depth, f.depth_scale, ts, distro=d)),
-                          ("/objscan/camera/color/camera_info", convert.camera_info(f.intrinsics, ts, distro=d))]
-            elif isinstance(ev, scene.ViewCloud):
-                items.append(("/objscan/view_cloud",
-                              convert.point_cloud2(ev.cloud.xyz, ev.cloud.rgb, t, ev.cloud.frame or convert.BASE, d)))
-            elif isinstance(ev, scene.Model):
-                items.append(("/objscan/model",
-                              convert.point_cloud2(ev.cloud.xyz, ev.cloud.rgb, t, ev.cloud.frame or convert.BASE, d)))
-        if isinstance(reply, ViewResult):
-            T = np.eye(4)
-            T[:3, 3] = np.asarray(reply.center, dtype=np.float64)
-            items.append(("/tf", convert.tf_message(
-                [convert.transform_stamped(T, convert.BASE, convert.OBJECT, t, d)], d)))
-        if items:
-            await self._put_cpu(items)
+        reply = p.get("reply")
+        if reply is not None:
+            # building the messages copies frames and clouds: off the loop, like their serialisation
+            items = await self.run_cpu(topics.of_exchange, t, reply, self.distro)
+            if items:
+                await self._put_cpu(items)
 
     # ------------------------------------------------------------------ services
     async def _serve_trigger(self, name: str, query: zenoh.Query) -> None:
