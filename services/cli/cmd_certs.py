@@ -27,7 +27,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-IDENTITIES = ("orchestrator", "camera", "arm", "sim", "registration", "grasp", "viewer", "operator")
+IDENTITIES = ("orchestrator", "camera", "arm", "sim", "registration", "grasp", "viewer", "operator", "ros2")
 """The identities of one cell (services, a read-only viewer, a person's CLI); each certificate's CN."""
 
 ROUTER_NAMES = ("zenoh-router", "localhost", "127.0.0.1", "::1")
