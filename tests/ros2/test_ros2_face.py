@@ -29,6 +29,7 @@ from services.ros2.convert import transform_matrix
 from services.ros2.types import TRIGGER, msg_class, serialize, type_hash
 
 ROBOT = keys.DEFAULT_ROBOT
+pytestmark = pytest.mark.slow  # a cell of real processes: a minute or more to start on 2 cores
 TS = get_typestore(Stores.ROS2_JAZZY)  # the independent reader: rosbags' store as shipped...
 # ... plus std_srvs/srv/Trigger's response, from the .srv text (the store holds messages only)
 TS.register(get_types_from_msg("bool success\nstring message", "std_srvs/msg/Trigger_Response"))

@@ -11,6 +11,7 @@ import threading
 import time
 
 import numpy as np
+import pytest
 import zenoh.ext as zext
 from rosbags.typesys import Stores, get_typestore
 
@@ -21,6 +22,7 @@ from services.ros2.convert import transform_matrix
 from services.ros2.types import type_hash
 
 TS = get_typestore(Stores.ROS2_JAZZY)
+pytestmark = pytest.mark.slow  # a cell of real processes: a minute or more to start on 2 cores
 
 
 def _key(topic: str, ros_type: str) -> str:
