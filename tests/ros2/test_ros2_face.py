@@ -230,6 +230,8 @@ def test_a_scan_started_and_stopped_through_the_ros2_services_and_its_frames_on_
         assert resp.success, resp.message
         session_dir = Path(json.loads(resp.message)["session"])
         assert session_dir.parent == (tmp / "sessions").resolve()
+        again, _ = _call(group.session, "/objscan/start_scan", 9)  # one acquisition at a time: a typed refusal
+        assert not again.success and again.message.startswith("busy:"), again
         color = listener.wait("/objscan/camera/color/image_raw", 1, timeout=90)[0]
         depth = listener.wait("/objscan/camera/depth/image_rect_raw", 1)[0]
         info = listener.wait("/objscan/camera/color/camera_info", 1)[0]
