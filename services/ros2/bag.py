@@ -26,15 +26,10 @@ from common.geometry import invert
 from common.messages import JointState
 from services.recording.reader import read_recording
 from services.ros2 import rmw, topics, types
+from services.ros2.errors import BagError
 
 BAG_VERSION = 9
 _INFINITE = QosTime(sec=9223372036, nsec=854775807)  # rmw's infinite duration
-
-
-class BagError(ObjscanError):
-    """The bag cannot be written (no recording, an existing output)."""
-
-    code = "bag_failed"
 
 
 @dataclass
