@@ -64,7 +64,7 @@ def test_a_scan_started_from_ros2_publishes_its_model_and_bags_its_recording(tmp
         req = serialize(msg_class("std_srvs/srv/Trigger_Request")(), "std_srvs/srv/Trigger_Request")
         replies = [r.ok for r in s.get(_key("/objscan/start_scan", TRIGGER), payload=req,
                                        attachment=rmw.attachment(1, time.time_ns(), bytes(16)), timeout=30) if r.ok]
-        resp = TS.deserialize_cdr(replies[0].payload.to_bytes(), "std_msgs/msg/Trigger_Response")
+        resp = TS.deserialize_cdr(replies[0].payload.to_bytes(), "std_srvs/msg/Trigger_Response")
         assert resp.success, resp.message
         session = Path(json.loads(resp.message)["session"])
         assert done.wait(1500), statuses[-3:]
