@@ -26,7 +26,7 @@ from services.ros2 import rmw
 from services.ros2.types import TRIGGER, msg_class, serialize, type_hash
 from tests.conftest import shared_data
 
-pytestmark = pytest.mark.extended
+pytestmark = [pytest.mark.slow, pytest.mark.extended]  # CI skips extended cases
 TS = get_typestore(Stores.ROS2_JAZZY)
 TS.register(get_types_from_msg("bool success\nstring message", "std_srvs/msg/Trigger_Response"))
 
