@@ -62,6 +62,7 @@ def bag_items(session: str | Path, distro: str = types.DEFAULT_DISTRO,
         is_state, is_status = key.endswith("/arm/state"), key.endswith("/orchestrator/status")
         if not (is_state or is_status):
             continue
+        states: list[tuple[int, JointState]] = []
         for (_, payload), t_ns in zip(samples, rec.sample_ns.get(key, []), strict=True):
             try:
                 msg = decode(payload)
@@ -69,12 +70,17 @@ def bag_items(session: str | Path, distro: str = types.DEFAULT_DISTRO,
                 skipped += 1
                 continue
             if is_state and isinstance(msg, JointState):
-                items += [(t_ns, name, ros) for name, ros in topics.of_state(msg, distro)]
-                if not static_done and msg.T_base_gripper is not None and msg.T_base_camera is not None:
-                    T_gripper_camera = invert(msg.T_base_gripper) @ msg.T_base_camera
-                    static_done = True
+                states.append((t_ns, msg))
             elif is_status:
                 items += [(t_ns, name, ros) for name, ros in topics.of_status(msg, distro)]
+        for (t_ns, _), ros_items in zip(states, topics.of_states([m for _, m in states], distro), strict=True):
+            items += [(t_ns, name, ros) for name, ros in ros_items]
+        if not static_done:
+            first = next((m for _, m in states if m.T_base_gripper is not None and m.T_base_camera is not None),
+                         None)
+            if first is not None:
+                T_gripper_camera = invert(first.T_base_gripper) @ first.T_base_camera
+                static_done = True
     for ex in rec.exchanges:
         try:
             reply = ex.reply_message()

@@ -62,6 +62,12 @@ def joint_state(names: list[str], position: np.ndarray, t: float, velocity: np.n
 def transform_stamped(T: np.ndarray, parent: str, child: str, t: float, distro: str = DEFAULT_DISTRO) -> Any:
     """``geometry_msgs/msg/TransformStamped`` of ``T_parent_child``."""
     p, q = matrix_to_pose(np.asarray(T, dtype=np.float64))
+    return transform_stamped_pq(p, q, parent, child, t, distro)
+
+
+def transform_stamped_pq(p: np.ndarray, q: np.ndarray, parent: str, child: str, t: float,
+                         distro: str = DEFAULT_DISTRO) -> Any:
+    """The same from a position and an (x, y, z, w) quaternion (computed for many poses at once by the caller)."""
     g = "geometry_msgs/msg/"
     return _t(g + "TransformStamped", distro)(
         header=header(t, parent, distro), child_frame_id=child,

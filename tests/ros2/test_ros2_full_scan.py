@@ -26,7 +26,7 @@ from services.ros2 import rmw
 from services.ros2.types import TRIGGER, msg_class, serialize, type_hash
 from tests.conftest import shared_data
 
-pytestmark = [pytest.mark.slow, pytest.mark.extended]  # CI skips extended cases
+pytestmark = [pytest.mark.slow, pytest.mark.extended, pytest.mark.timeout(2400)]  # CI skips extended cases
 TS = get_typestore(Stores.ROS2_JAZZY)
 TS.register(get_types_from_msg("bool success\nstring message", "std_srvs/msg/Trigger_Response"))
 
@@ -92,7 +92,9 @@ def test_a_scan_started_from_ros2_publishes_its_model_and_bags_its_recording(tmp
     np.testing.assert_allclose(np.asarray(ply.points), xyz, atol=1e-6)
 
     out = tmp_path / "scan.bag"
+    t0 = time.monotonic()
     assert objscan(["ros2-bag", str(session), "--out", str(out)]) == 0
+    print(f"ros2-bag of a {len(xyz)}-point, 3-view session: {time.monotonic() - t0:.1f} s")
     rec = read_recording(session)
     with Reader(out) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
