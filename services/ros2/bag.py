@@ -36,7 +36,7 @@ _INFINITE = QosTime(sec=9223372036, nsec=854775807)  # rmw's infinite duration
 class BagSummary:
     path: Path
     counts: dict[str, int] = field(default_factory=dict)  # topic -> messages written
-    skipped: int = 0  # recorded messages that could not be decoded (a torn record): not in the bag
+    skipped: int = 0  # recorded messages a topic shows that could not be decoded (a torn record): not in the bag
     distro: str = types.DEFAULT_DISTRO
 
     def as_dict(self) -> dict[str, Any]:
@@ -82,6 +82,8 @@ def bag_items(session: str | Path, distro: str = types.DEFAULT_DISTRO,
                 T_gripper_camera = invert(first.T_base_gripper) @ first.T_base_camera
                 static_done = True
     for ex in rec.exchanges:
+        if not ex.key.endswith(topics.EXCHANGE_KEY_ENDINGS):
+            continue  # arm moves, grasp plans, pair jobs: nothing a topic shows
         try:
             reply = ex.reply_message()
         except ObjscanError:

@@ -41,6 +41,10 @@ TOPICS: dict[str, tuple[str, rmw.QoS]] = {
 }
 
 
+# the exchanges that carry something a topic shows (a capture, a view, the model): their keys end so
+EXCHANGE_KEY_ENDINGS = ("/camera/capture", "registration/static", "registration/dynamic")
+
+
 def of_exchange(t: float, reply: Message | None, distro: str) -> list[tuple[str, Any]]:
     """ROS 2 messages of one of the orchestrator's exchanges (a capture, a view, the model); others give none.
 
