@@ -111,9 +111,10 @@ def quat_xyzw_to_matrix(q: np.ndarray) -> np.ndarray:
 
 
 def matrix_to_quat_xyzw(R: np.ndarray) -> np.ndarray:
-    """Quaternion (x, y, z, w) with w >= 0, so equal rotations compare equal."""
+    """Quaternion (x, y, z, w) with w >= 0, so equal rotations compare equal. A stack (N, 3, 3) gives (N, 4)
+    in one call (tens of thousands of poses: a recording's joint states)."""
     q = Rotation.from_matrix(np.asarray(R, dtype=float)).as_quat()
-    return -q if q[3] < 0 else q
+    return np.where(q[..., 3:4] < 0, -q, q)
 
 
 def pose_to_matrix(position: np.ndarray, quat_xyzw: np.ndarray) -> np.ndarray:

@@ -206,6 +206,10 @@ class Service:
         """Extra figures for the health reply (backend, queue depth, ...)."""
         return {}
 
+    def zenoh_config(self) -> zenoh.Config:
+        """The Zenoh configuration the session opens with; a service that needs more (timestamps) adds it."""
+        return self.settings.zenoh.to_zenoh()
+
     def queryable(self, key: str, handler: Handler | InlineHandler, *, complete: bool = True,
                   budget: Budget = DEFAULT_BUDGET, priority: bool = False, inline: bool = False) -> None:
         """Serve ``key`` with ``async def handler(request_message_or_None, ctx) -> reply_message``.
@@ -378,7 +382,7 @@ class Service:
     async def run(self) -> None:
         """Open the session, serve until stopped, then shut down cleanly."""
         self.loop = asyncio.get_running_loop()
-        self.session = zenoh.open(self.settings.zenoh.to_zenoh())
+        self.session = zenoh.open(self.zenoh_config())
         if self.settings.zenoh.connect and not await asyncio.to_thread(wait_connected, self.session, 10.0):
             event(log, "no zenoh link yet; serving anyway, peers may join later", logging.WARNING,
                   connect=",".join(self.settings.zenoh.connect))

@@ -21,6 +21,7 @@ from common.messages import Request
 from common.session_folder import atomic_write_json
 from common.zenoh_config import DEFAULT_ROUTER_PORT
 from services.calibration.procedure import ProcedureConfig, run_procedure
+from services.calibration.ros_files import write_ros_files
 from services.cell import hardware_services
 from services.cli.cells import add_network_args, remote_session
 from services.cli.cmd_scan import console, ensure_cell
@@ -85,7 +86,10 @@ def _calibrate(session, args, cfg: ProcedureConfig, out: Path, t0: float) -> int
         except ObjscanError as exc:  # parking is a courtesy: the calibration stands either way
             console.print(f"[yellow]could not move the arm home: {exc.code}[/yellow]")
     res.calibration.save(out)
-    f = {"ok": True, "file": str(out.resolve()), **res.figures, "seconds_total": round(time.time() - t0, 1)}
+    urdf, tf_static = write_ros_files(res.calibration.T_gripper_camera, out,
+                                      note=f"{res.figures.get('seed_method', '')}, {time.strftime('%Y-%m-%d')}")
+    f = {"ok": True, "file": str(out.resolve()), **res.figures, "seconds_total": round(time.time() - t0, 1),
+         "urdf_joint": str(urdf.resolve()), "tf_static": str(tf_static.resolve())}
     f["T_gripper_camera"] = res.calibration.T_gripper_camera.tolist()
     f["correction"] = res.calibration.correction.tolist()
     if args.json:
@@ -98,5 +102,6 @@ def _calibrate(session, args, cfg: ProcedureConfig, out: Path, t0: float) -> int
                       f"{f['rotation_error_deg']:.4f} deg[/bold] (uncalibrated: {f['nominal_translation_error_mm']:.2f}"
                       f" mm / {f['nominal_rotation_error_deg']:.3f} deg)")
     console.print(f"wrote {out} (load it with: camera service --hand-eye {out}, or OBJSCAN_HAND_EYE={out})")
+    console.print(f"for ROS 2: {urdf} (URDF joint gripper -> camera) and {tf_static} (static transform)")
     print(json.dumps({k: f[k] for k in ("translation_error_mm", "rotation_error_deg", "views_used", "file")}))
     return 0

@@ -30,7 +30,7 @@ from pathlib import Path
 
 from common.errors import ObjscanError
 
-IDENTITIES = ("orchestrator", "camera", "arm", "sim", "registration", "grasp", "viewer", "operator")
+IDENTITIES = ("orchestrator", "camera", "arm", "sim", "registration", "grasp", "viewer", "operator", "ros2")
 """The identities of one cell (services, a read-only viewer, a person's CLI); each certificate's CN."""
 
 ROUTER_NAMES = ("zenoh-router", "localhost", "127.0.0.1", "::1")

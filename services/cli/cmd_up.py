@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 from common.errors import ObjscanError
-from common.launcher import ServiceGroup
+from common.launcher import ProcessSpec, ServiceGroup
 from common.zenoh_config import DEFAULT_ROUTER_PORT
 from services.cell import CELLS, SERVICE_MODULES, cell_specs
 from services.cli.cells import add_network_args, network_settings
@@ -34,6 +34,12 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--only", help=f"start only these services, comma-separated: {', '.join(SERVICE_MODULES)} "
                                   "(default: all)")
     p.add_argument("--log-dir", default="logs", help="one log file per process (default: %(default)s)")
+    p.add_argument("--ros2", action="store_true",
+                   help="also start the ROS 2 face: the cell as ROS 2 topics and scan services on rmw_zenoh keys "
+                        "of the same router (docs/ros2.md); the orchestrator then publishes its exchanges")
+    p.add_argument("--ros2-arg", action="append", default=[], metavar="ARG",
+                   help="an argument for the ROS 2 face, repeatable, e.g. --ros2-arg=--domain-id=3 or "
+                        "--ros2-arg=--hand-eye=calibration/hand_eye.json")
     add_network_args(p)
     p.set_defaults(func=run)
 
@@ -56,6 +62,11 @@ def arm_args(args) -> dict[str, list[str]]:  # noqa: ANN001
     return {"arm": out} if out else {}
 
 
+def ros2_spec(extra: list[str]) -> ProcessSpec:
+    """The ROS 2 face's process (``services/ros2``), with its own arguments."""
+    return ProcessSpec("services.ros2", list(extra), service="ros2")
+
+
 def run(args) -> int:  # noqa: ANN001
     names = [n for n in args.only.split(",") if n] if args.only else None
     unknown = set(names or []) - set(SERVICE_MODULES)
@@ -70,7 +81,11 @@ def run(args) -> int:  # noqa: ANN001
         if args.connect:  # join a running router (TLS variables honoured) instead of starting one
             group.settings = network_settings(args.connect)
             group.endpoint = args.connect
+        if args.ros2:  # the face republishes frames, clouds and the model from the orchestrator's tap
+            extra["orchestrator"] = [*extra.get("orchestrator", []), "--tap"]
         specs = cell_specs(names, backend=args.backend, extra_args=extra)
+        if args.ros2:
+            specs.append(ros2_spec(args.ros2_arg))
         what = f"joining {group.endpoint} with" if args.connect else f"starting router on {group.endpoint} and"
         print(f"{what} {len(specs)} services (logs in {args.log_dir}/)")
         group.launch(specs)

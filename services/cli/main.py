@@ -34,6 +34,7 @@ COMMANDS = [
     "services.cli.cmd_certs",
     "services.cli.cmd_devices",
     "services.cli.cmd_calibrate",
+    "services.cli.cmd_ros2_bag",  # last: it offers 'export --ros2-bag' only when no export command exists
 ]
 
 

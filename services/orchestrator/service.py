@@ -73,7 +73,7 @@ class OrchestratorService(Service):
             self.current, run = recorded_acquisition(
                 lambda cell: Acquisition(cell, store, config, on_status=self._publish, library=library),
                 self.request, path, self.session, self.robot, enabled=params.get("record", True) is not False,
-                live=bool(params.get("live", False)))
+                live=bool(params.get("live", False)) or bool(self.settings.options.get("tap", False)))
         except BaseException:
             store.release_lock()
             raise
@@ -129,6 +129,9 @@ def main() -> None:
     p = service_arg_parser("objscan orchestrator: the acquisition state machine")
     p.add_argument("--sessions", default="sessions", help="root folder for new sessions (default: %(default)s)")
     p.add_argument("--library", default="models", help="model library folder (default: %(default)s)")
+    p.add_argument("--tap", action="store_true",
+                   help="publish every run's exchanges on orchestrator/tap, as a run with live: true does "
+                        "(the ROS 2 face republishes frames, clouds and the model from it)")
     args = p.parse_args()
     run_service(lambda: OrchestratorService(settings_from_args(args, sessions=args.sessions,
-                                                               library=args.library)))
+                                                               library=args.library, tap=args.tap)))
