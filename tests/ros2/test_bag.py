@@ -160,5 +160,6 @@ def test_a_bag_is_never_written_over_and_a_missing_recording_is_a_typed_error(se
     out.mkdir()
     assert objscan(["ros2-bag", str(session), "--out", str(out)]) == 1
     assert "bag_failed" in capsys.readouterr().err
-    assert objscan(["ros2-bag", str(tmp_path / "nothing"), "--out", str(tmp_path / "c"), "--json"]) == 1
+    assert objscan(["ros2-bag", str(tmp_path / "nothing"), "--out", str(tmp_path / "c"), "--json"]) == 2  # bad input
+    assert "[bad_recording]" in capsys.readouterr().err
     assert not (tmp_path / "c").exists()
