@@ -45,6 +45,7 @@ from services.cli.outcome import USAGE, one_line, print_json, report_error, warn
 from services.cli.stop import StopOnInterrupt
 from services.live import add_live_args, live_requested, open_live_view
 from services.private_cell import DEFAULT_GRACE_S, PrivateCell, cell_lock_path, find_cell, start_cell
+from services.sim.demo_objects import DEFAULT_OBJECT
 
 console = Console()
 
@@ -53,7 +54,9 @@ def register(sub) -> None:  # noqa: ANN001
     p = sub.add_parser("scan", help="run a whole acquisition: views, grasps, turns, model",
                        description="Acquire a model of an object: 12 views 30 degrees apart by default. Starts "
                                    "the services (sim backends) when none are running.")
-    p.add_argument("--object", default="milk", help="HOPE object name or mesh path (sim) (default: %(default)s)")
+    p.add_argument("--object", default=DEFAULT_OBJECT,
+                   help="sim: a demo object (carton, can, flat_box), a HOPE name, or a mesh file or folder "
+                        "(default: %(default)s)")
     p.add_argument("--views", type=int, default=12)
     p.add_argument("--profile", default="robot-turned", choices=["ideal", "hand-turned", "realistic", "robot-turned"],
                    help="sim error profile (default: %(default)s)")
