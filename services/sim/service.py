@@ -33,6 +33,7 @@ from common.messages import D435_COLOR_SIZES, JointState, Ok, Request, RGBDFrame
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
 from services.sim.demo_objects import DEFAULT_OBJECT
 from services.sim.object_roots import ObjectRoots
+from services.sim.render import warm_up
 from services.sim.state_file import StateFile, resolve_state_path
 from services.sim.world import World, default_object_pose
 
@@ -72,6 +73,7 @@ class SimService(Service):
                                                           physics=opts.get("physics", "geometric")))
             self.seq = 0
         self._persist()
+        await self.run_cpu(warm_up, self.world.obj)  # compiled kernels before the first frame is asked for
         self._world_lock = asyncio.Lock()
         r = self.robot
         self.queryable(keys.sim(r, "render"), self.render)

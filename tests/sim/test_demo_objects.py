@@ -177,3 +177,18 @@ def test_demo_sh_scans_the_demo_object():
     text = (REPO / "scripts" / "demo.sh").read_text()
     assert re.search(r"objscan scan --object carton --views 12\b", text)
     assert "--object milk" not in text
+
+
+def test_the_twin_compiles_its_kernels_before_the_first_frame():
+    """``render.warm_up`` (called by the twin's service before it is ready) leaves the shading and D435 kernels
+    compiled, so a fresh checkout's first frame does not wait for numba past the camera's deadline."""
+    code = ("from services.sim import render, sensor_model\n"
+            "from services.sim.catalogue import load_object\n"
+            "kernels = (render._compose, sensor_model._depth_edges, sensor_model._occluded)\n"
+            "assert not any(k.signatures for k in kernels)\n"
+            "render.warm_up(load_object('carton'))\n"
+            "print([len(k.signatures) for k in kernels])\n")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.strip() == "[1, 1, 1]", proc.stdout
