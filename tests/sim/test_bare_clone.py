@@ -4,7 +4,7 @@
 data folder beside a developer's checkout is reachable, and ``objscan scan --object carton`` runs there with
 no ``OBJSCAN_*`` variable set: the whole cell (twin, arm, camera, grasp, registration, orchestrator) starts
 from the copy and ends with a model measured against the carton's own mesh. Real processes over Zenoh on
-loopback, MuJoCo physics, 3 views: minutes, so ``slow``.
+loopback, MuJoCo physics, 3 views: minutes (16 on a loaded 2-core machine), so ``slow``.
 """
 
 from __future__ import annotations
@@ -75,4 +75,6 @@ def test_a_bare_copy_of_the_repository_scans_the_demo_carton(tmp_path):
     model = Path(journal["model_path"])
     model = model if model.is_absolute() else copy / model
     assert model.is_file() and model.resolve().is_relative_to(copy.resolve()), journal["model_path"]
-    assert journal["accuracy"]["chamfer_mm"] < 5.0, journal["accuracy"]
+    # 3 views 30 degrees apart see a third of the carton: what the model holds lies on it (accuracy, model to
+    # mesh); completeness and Chamfer need the 12 views of scripts/demo.sh
+    assert journal["accuracy"]["accuracy_mm"] < 2.0, journal["accuracy"]
