@@ -30,6 +30,7 @@ from services.cli.cmd_scan import console, ensure_cell
 from services.cli.outcome import require_path
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.planning import look_pose
+from services.sim.demo_objects import DEFAULT_OBJECT
 
 
 def register(sub) -> None:  # noqa: ANN001
@@ -38,7 +39,8 @@ def register(sub) -> None:  # noqa: ANN001
                                    "depth_scale and T_base_camera) through the camera service.")
     p.add_argument("--backend", choices=list(CAMERA_BACKENDS), default="sim",
                    help="camera backend (services/camera/registry.py); sim starts the twin and the arm too")
-    p.add_argument("--object", default="milk", help="sim: HOPE object name or mesh path")
+    p.add_argument("--object", default=DEFAULT_OBJECT,
+                   help="sim: a demo object (carton, can, flat_box), a HOPE name, or a mesh file or folder")
     p.add_argument("--profile", default="ideal", help="sim: error profile")
     p.add_argument("--seed", type=int, default=0, help="sim: seed of the profile's drawn errors (default: %(default)s)")
     p.add_argument("--width", type=int, default=640, help="image width in pixels (default: %(default)s)")

@@ -17,9 +17,11 @@ import yaml
 
 from services.cli.outcome import BadUsage, require_path
 from services.orchestrator.config import UP_AXES, AcquisitionConfig, ConfigError
+from services.sim.demo_objects import DEFAULT_OBJECT
 
-CLI_DEFAULTS: dict[str, Any] = {"physics": "mujoco"}
-"""Where the command's default differs from the config's: a scan from the CLI grasps with contact physics."""
+CLI_DEFAULTS: dict[str, Any] = {"physics": "mujoco", "object": DEFAULT_OBJECT}
+"""Where the command's default differs from the config's: a scan from the CLI grasps with contact physics, and
+scans a demo object that ships with objscan (a bare checkout has no other)."""
 
 FLAG_KEYS = {  # argparse dest -> config key, for the flags that set a config key
     "object": "object", "views": "views", "profile": "profile", "seed": "seed", "physics": "physics",
@@ -45,7 +47,8 @@ def add_config_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", metavar="FILE.yaml",
                    help="acquisition config file: the keys of the orchestrator's config (docs/orchestrator.md); "
                         "flags given here override it")
-    p.add_argument("--object", help=f"HOPE object name or mesh path (sim) (default: {d.object})")
+    p.add_argument("--object", help="sim: a demo object (carton, can, flat_box), a HOPE name, or a mesh file or "
+                                    f"folder (default: {CLI_DEFAULTS['object']})")
     p.add_argument("--scale", type=float,
                    help="sim: the mesh's units in metres, e.g. 0.001 for a mesh in millimetres (default: the "
                         "file's own: HOPE 0.01, other meshes 1)")

@@ -31,7 +31,9 @@ from common.errors import InvalidRequest
 from common.log import event
 from common.messages import D435_COLOR_SIZES, JointState, Ok, Request, RGBDFrame, d435_intrinsics
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from services.sim.demo_objects import DEFAULT_OBJECT
 from services.sim.object_roots import ObjectRoots
+from services.sim.render import warm_up
 from services.sim.state_file import StateFile, resolve_state_path
 from services.sim.world import World, default_object_pose
 
@@ -65,13 +67,14 @@ class SimService(Service):
             event(log, "world restored from the state file", path=str(path), object=self.world.obj.name,
                   frames=self.seq, attached=self.world.attached)
         else:
-            self.world = await self.run_cpu(lambda: World(opts.get("object", "milk"),
+            self.world = await self.run_cpu(lambda: World(opts.get("object", DEFAULT_OBJECT),
                                                           profile=opts.get("profile", "ideal"),
                                                           seed=int(opts.get("seed", 0)),
                                                           physics=opts.get("physics", "geometric"),
                                                           scale=opts.get("scale"), up_axis=opts.get("up_axis")))
             self.seq = 0
         self._persist()
+        await self.run_cpu(warm_up, self.world.obj)  # compiled kernels before the first frame is asked for
         self._world_lock = asyncio.Lock()
         r = self.robot
         self.queryable(keys.sim(r, "render"), self.render)
@@ -244,11 +247,14 @@ def _up_axis(value: object) -> str | None:
 
 def main() -> None:
     p = service_arg_parser("objscan digital twin (simulated table, object, arm, gripper and D435)")
-    p.add_argument("--object", default="milk", help="HOPE object name or a mesh path (default: %(default)s)")
+    p.add_argument("--object", default=DEFAULT_OBJECT,
+                   help="the object to start with: a demo object (carton, can, flat_box), a HOPE name or a mesh "
+                        "path (default: %(default)s)")
     p.add_argument("--object-dir", action="append", default=[], metavar="DIR",
-                   help="a folder whose meshes a reset request may name (repeatable; also "
-                        "$OBJSCAN_SIM_OBJECT_DIRS). Besides these, only HOPE objects, the --object given "
-                        "here and the world's current object can be loaded")
+                   help="a folder whose meshes a reset request may name, by path or by the name of a sub-folder or "
+                        "mesh file in it (repeatable; also $OBJSCAN_SIM_OBJECT_DIRS). Besides these, only the demo "
+                        "objects, HOPE objects, the --object given here and the world's current object can be "
+                        "loaded")
     p.add_argument("--scale", type=float, default=None,
                    help="the --object mesh's units in metres, e.g. 0.001 for millimetres (default: the file's own: "
                         "HOPE 0.01, other meshes 1)")
