@@ -9,4 +9,4 @@ cd "$(dirname "$0")/.."
 bash scripts/install.sh
 export OMP_NUM_THREADS="${OMP_NUM_THREADS:-2}"
 out="sessions/demo-$(date +%Y%m%d-%H%M%S)"
-exec .venv/bin/objscan scan --object carton --views 12 --profile robot-turned --seed 1 --out "$out" "$@"
+exec .venv/bin/objscan scan --object can --views 12 --profile robot-turned --seed 1 --out "$out" "$@"

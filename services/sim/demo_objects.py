@@ -25,7 +25,7 @@ MESH_FILE = "textured.obj"
 MTL_FILE = "textured.mtl"
 TEXTURE_FILE = "texture_map.png"
 #: The object the twin starts with and the demo scans: present in every checkout.
-DEFAULT_OBJECT = "carton"
+DEFAULT_OBJECT = "can"
 
 
 @dataclass(frozen=True)

@@ -175,7 +175,7 @@ def test_the_image_and_the_package_carry_the_demo_objects():
 
 def test_demo_sh_scans_the_demo_object():
     text = (REPO / "scripts" / "demo.sh").read_text()
-    assert re.search(r"objscan scan --object carton --views 12\b", text)
+    assert re.search(r"objscan scan --object can --views 12\b", text)
     assert "--object milk" not in text
 
 
