@@ -25,6 +25,7 @@ COMMANDS = [
     "services.cli.cmd_scan",
     "services.cli.cmd_capture",
     "services.cli.cmd_reconstruct",
+    "services.cli.cmd_export",
     "services.cli.cmd_import",
     "services.cli.cmd_models",
     "services.cli.cmd_report",

@@ -1,8 +1,9 @@
 """Figures of an export against the simulator's ground truth (evaluation only, simulated sessions).
 
 The mesh and the point model are measured by the one evaluator (``services/registration/evaluation``) the
-acquisition reports its accuracy with: the true object mesh posed where the object stood in view 0
-(``T_base_object_true`` of the first scan), ICP-aligned from there, Chamfer distance in millimetres. The
+acquisition reports its accuracy with, as the acquisition calls it: 60,000 true surface samples posed where
+the object stood in view 0 (``T_base_object_true`` of the first scan), ICP-aligned from there, Chamfer
+distance in millimetres. The
 mesh is sampled uniformly by area into as many points as the point model has, so both are compared at the
 same density.
 """
@@ -18,9 +19,15 @@ from common.errors import ObjscanError
 from services.export.inputs import SessionModel
 from services.registration.evaluation import evaluate_model, sample_mesh
 
+#: True surface samples, as many as the acquisition's own evaluation draws.
+GT_POINTS = 60000
 
-def true_mesh(model: SessionModel) -> tuple[o3d.geometry.TriangleMesh, float] | None:
-    """The true object mesh posed in ``base`` at view 0 and its volume (m^3), or None outside the simulator."""
+
+def true_surface(model: SessionModel, n: int = GT_POINTS) -> tuple[np.ndarray, float] | None:
+    """True surface samples posed in ``base`` at view 0 and the true volume (m^3), or None outside the simulator.
+
+    Points, as the acquisition's own evaluation uses (``gt_points`` of the twin, 60,000 of them).
+    """
     import trimesh
 
     from services.sim.catalogue import load_object
@@ -33,17 +40,15 @@ def true_mesh(model: SessionModel) -> tuple[o3d.geometry.TriangleMesh, float] | 
         obj = load_object(str(name))
     except ObjscanError:
         return None
-    mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.array(obj.vertices, dtype=np.float64)),
-                                     o3d.utility.Vector3iVector(np.array(obj.triangles, dtype=np.int32)))
-    mesh.transform(T)
+    pts = obj.gt_points(n) @ T[:3, :3].T + T[:3, 3]
     volume = abs(float(trimesh.Trimesh(obj.vertices, obj.triangles, process=False).volume))
-    return mesh, volume
+    return pts, volume
 
 
 def ground_truth_figures(model: SessionModel, mesh_object: o3d.geometry.TriangleMesh, T_model_object: np.ndarray,
                          mesh_volume: float, seed: int = 0) -> dict[str, Any] | None:
     """``mesh_chamfer_mm``, ``points_chamfer_mm``, ``volume_ratio`` (+ details), or None without ground truth."""
-    truth = true_mesh(model)
+    truth = true_surface(model)
     if truth is None:
         return None
     gt, gt_volume = truth
