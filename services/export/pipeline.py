@@ -29,6 +29,21 @@ from services.export.writers import FORMATS, write_all
 #: The surface method used when none is asked for: the better of the two on the HOPE sessions (docs/export.md).
 DEFAULT_METHOD = "poisson"
 OBJECT_FRAME_FILE = "object_frame.json"
+#: The closed mesh beside ``model.ply``, in the same frame: the model library stores it with the entry.
+SESSION_MESH_FILE = "mesh.ply"
+
+
+def _write_session_mesh(mesh, T_model_object: np.ndarray, path: Path) -> None:  # noqa: ANN001
+    """The closed mesh in the model's frame (view 0's ``base``) as ``SESSION/mesh.ply``."""
+    import open3d as o3d
+
+    from common.atomic import atomic_path
+
+    posed = o3d.geometry.TriangleMesh(mesh)
+    posed.transform(T_model_object)
+    with atomic_path(path) as tmp:
+        if not o3d.io.write_triangle_mesh(str(tmp), posed, write_ascii=False):
+            raise ExportError(f"could not write {path}", code="io_error")
 
 
 def asset_name(model: SessionModel) -> str:
@@ -91,6 +106,7 @@ def export_session(session: str | Path, out: str | Path, *, formats: tuple[str, 
     out = Path(out)
     files = write_all(textured, parts, body, out, name, tuple(formats))
     t = lap("write", t)
+    _write_session_mesh(mesh, T_model_object, Path(session) / SESSION_MESH_FILE)
     atomic_write_json(Path(session) / OBJECT_FRAME_FILE, {
         "T_base_object": T_model_object.tolist(), "frame": "base of view 0",
         "definition": "origin at the footprint centre on the table, z up along the table normal, "
