@@ -90,12 +90,13 @@ def _render(scene, box_id, T_base_camera, intr, box):  # noqa: ANN001, ANN202
     geom = hit["geometry_ids"].numpy()
     prim = hit["primitive_ids"].numpy()
     r = rays.numpy()
+    t = np.where(np.isfinite(t), t, 0.0)  # a ray that misses everything: no depth
     pts = r[..., :3] + r[..., 3:] * t[..., None]
     cam = (np.linalg.inv(T_base_camera) @ np.c_[pts.reshape(-1, 3), np.ones(pts.shape[0] * pts.shape[1])].T).T
-    z = cam[:, 2].reshape(t.shape)
+    z = np.where(t > 0, cam[:, 2].reshape(t.shape), np.nan)
     depth = np.where(np.isfinite(z), np.round(z * 1000.0), 0).astype(np.uint16)
     colour = np.full(t.shape + (3,), 150, dtype=np.uint8)
-    on_box = (geom == box_id) & np.isfinite(t)
+    on_box = (geom == box_id) & (t > 0)
     face = prim[on_box] // 2  # create_box: two triangles per face
     colour[on_box] = FACE_COLOURS[face % 6]
     return depth, colour, pts[on_box].astype(np.float64), colour[on_box]
