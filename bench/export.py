@@ -37,8 +37,12 @@ def targets(r: dict[str, Any]) -> dict[str, bool]:
             "seconds_le_30": r.get("seconds", 1e9) <= 30.0}
 
 
-def run(sessions: list[Path], out: Path, methods: tuple[str, ...]) -> dict[str, Any]:
+def run(sessions: list[Path], out: Path, methods: tuple[str, ...], save=None) -> dict[str, Any]:  # noqa: ANN001
+    """Export every session with every method; ``save(doc)`` after each row (a long run keeps what it has)."""
     rows: list[dict[str, Any]] = []
+    doc: dict[str, Any] = {"benchmark": "export", "machine": {
+        "cpus": os.cpu_count(), "platform": platform.platform(),
+        "note": "2-core machine shared with other engineers' runs; load average per row"}, "rows": rows}
     for method in methods:  # the default method on every session first
         for session in sessions:
             load = os.getloadavg()[0]
@@ -47,6 +51,8 @@ def run(sessions: list[Path], out: Path, methods: tuple[str, ...]) -> dict[str, 
             except ObjscanError as exc:
                 rows.append({"session": str(session), "method": method, "error": {"code": exc.code,
                                                                                    "message": exc.message}})
+                if save:
+                    save(doc)
                 continue
             row = {"object": r["name"], "session": str(session), "method": method, "load_before": round(load, 1),
                    **{k: r.get(k) for k in KEYS}}
@@ -55,10 +61,10 @@ def run(sessions: list[Path], out: Path, methods: tuple[str, ...]) -> dict[str, 
             print(json.dumps({k: row[k] for k in ("object", "method", "mesh_chamfer_mm", "points_chamfer_mm",
                                                   "volume_ratio", "parts", "seconds", "cpu_seconds", "watertight")}),
                   flush=True)
-    return {"benchmark": "export", "stamp": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-            "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
-                        "note": "2-core machine shared with other engineers' runs; load average per row"},
-            "rows": rows}
+            doc["stamp"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+            if save:
+                save(doc)
+    return doc
 
 
 def main() -> None:
@@ -68,15 +74,19 @@ def main() -> None:
     p.add_argument("--methods", default=",".join(METHODS), help="comma-separated surface methods")
     p.add_argument("--json", type=Path, required=True, help="the figures, as JSON")
     args = p.parse_args()
-    doc = run(args.sessions, args.out, tuple(m for m in args.methods.split(",") if m))
+    old: list[dict[str, Any]] = []
     if args.json.exists():  # keep the rows of sessions not run this time
         try:
             old = json.loads(args.json.read_text()).get("rows", [])
         except (OSError, json.JSONDecodeError):
             old = []
+
+    def save(doc: dict[str, Any]) -> None:
         done = {(r["session"], r["method"]) for r in doc["rows"]}
-        doc["rows"] = [r for r in old if (r.get("session"), r.get("method")) not in done] + doc["rows"]
-    atomic_write_json(args.json, doc)
+        kept = [r for r in old if (r.get("session"), r.get("method")) not in done]
+        atomic_write_json(args.json, {**doc, "rows": kept + doc["rows"]})
+
+    run(args.sessions, args.out, tuple(m for m in args.methods.split(",") if m), save=save)
 
 
 if __name__ == "__main__":
