@@ -27,7 +27,7 @@ from services.export.texture import bake_texture, vertex_coloured
 from services.export.writers import FORMATS, write_all
 
 #: The surface method used when none is asked for: Poisson on the point model, which needs no frames and met
-#: the Chamfer targets on three of four HOPE sessions; the TSDF figures are in bench/latest/export.json.
+#: the Chamfer targets on three of four HOPE sessions; the TSDF path fails on them (docs/export.md).
 DEFAULT_METHOD = "poisson"
 OBJECT_FRAME_FILE = "object_frame.json"
 #: The closed mesh beside ``model.ply``, in the same frame: the model library stores it with the entry.
