@@ -1,9 +1,8 @@
 """``objscan ros2-bag SESSION --out OUT``: a session's recording as a ROS 2 bag folder (MCAP storage).
 
 ``ros2 bag play OUT`` then replays the scan into any ROS 2 graph (RViz, Foxglove) with the topics of the live
-ROS 2 face (docs/ros2.md). The same bag is offered as ``objscan export SESSION --ros2-bag OUT`` when no other
-``export`` command is registered; an ``export`` command elsewhere can take the option with
-``add_ros2_bag_options`` and ``write_ros2_bag``.
+ROS 2 face (docs/ros2.md). ``objscan export SESSION --ros2-bag OUT`` writes the same bag (its options come from
+``add_ros2_bag_options``, its writing from ``write_ros2_bag``).
 """
 
 from __future__ import annotations
@@ -15,7 +14,7 @@ from typing import Any
 from services.cli import outcome
 
 
-def add_ros2_bag_options(p: argparse.ArgumentParser, *, required: bool, flag: str) -> None:
+def add_ros2_bag_options(p: argparse.ArgumentParser, *, required: bool, flag: str, json_flag: bool = True) -> None:
     """The bag's options on a parser: the output folder (``flag``), the distribution, the hand-eye file."""
     p.add_argument(flag, dest="ros2_bag", required=required, metavar="OUT",
                    help="ROS 2 bag folder to write (metadata.yaml + MCAP); must not exist")
@@ -23,7 +22,8 @@ def add_ros2_bag_options(p: argparse.ArgumentParser, *, required: bool, flag: st
                    help="message definitions and type hashes of this ROS 2 distribution (default: %(default)s)")
     p.add_argument("--hand-eye", help="hand-eye calibration file for /tf_static gripper -> camera "
                                       "(default: the mount the arm reported)")
-    p.add_argument("--json", action="store_true", help="print the result (counts per topic) as JSON")
+    if json_flag:
+        p.add_argument("--json", action="store_true", help="print the result (counts per topic) as JSON")
 
 
 def write_ros2_bag(session: str, args: Any) -> int:
@@ -54,9 +54,3 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("session", help="session folder (or one session.mcap)")
     add_ros2_bag_options(p, required=True, flag="--out")
     p.set_defaults(func=lambda args: write_ros2_bag(args.session, args))
-    if "export" not in sub.choices:  # no export command of its own yet: offer the bag under that name
-        e = sub.add_parser("export", help="export a session (here: --ros2-bag OUT, a ROS 2 bag)",
-                           description="Export a session: --ros2-bag writes it as a ROS 2 bag folder.")
-        e.add_argument("session", help="session folder (or one session.mcap)")
-        add_ros2_bag_options(e, required=True, flag="--ros2-bag")
-        e.set_defaults(func=lambda args: write_ros2_bag(args.session, args))

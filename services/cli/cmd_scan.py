@@ -40,7 +40,7 @@ from common.messages import Ok, Request
 from common.zenoh_config import DEFAULT_ROUTER_PORT, free_tcp_port
 from services.cell import SERVICE_MODULES, cell_specs, needs_twin
 from services.cli.cells import add_network_args, remote_session, session_name
-from services.cli.outcome import BadUsage, error_line, print_json, require_path, warn_unaccepted
+from services.cli.outcome import BadUsage, error_line, one_line, print_json, require_path, warn_unaccepted
 from services.cli.scan_config import FLAG_KEYS, add_config_args, scan_config
 from services.cli.stop import StopOnInterrupt
 from services.live import add_live_args, live_requested, open_live_view
@@ -78,6 +78,9 @@ def register(sub) -> None:  # noqa: ANN001
                    help="register every view pair at the end, not while the arm turns (the old, slower path)")
     p.add_argument("--no-record", action="store_true", help="do not record the session to session.mcap")
     p.add_argument("--library", help="model library folder the model is added to (default: the orchestrator's)")
+    p.add_argument("--export", action="store_true",
+                   help="after a finished scan, export the model as a watertight textured mesh and a simulation "
+                        "asset (MJCF, URDF, GLB, OBJ, PLY, STL) into SESSION/export (docs/export.md)")
     p.add_argument("--robot", default=keys.DEFAULT_ROBOT,
                    help="robot cell id in the services' keys (default: %(default)s)")
     add_network_args(p)
@@ -222,7 +225,34 @@ def run(args) -> int:  # noqa: ANN001
         # --out, name the session and let it place it there (a local absolute path would be refused)
         joined = "orchestrator" not in group.procs
         target = session_dir.name if joined and not args.out and not args.resume else str(session_dir)
-        return _acquire(group.session, args, config, target, local=True, t0=t0)
+        code = _acquire(group.session, args, config, target, local=True, t0=t0)
+    if code == 0 and getattr(args, "export", False):
+        code = export_after_scan(session_dir, quiet=bool(args.json_output))
+    return code
+
+
+def export_after_scan(session_dir: Path, *, quiet: bool) -> int:
+    """``--export``: the finished session exported into ``SESSION/export``; 1 with one line when it fails.
+
+    The scan's own JSON document (``--json``) stays the only thing on stdout: the export's figures are in
+    ``SESSION/export/export.json``.
+    """
+    from services.export import export_session
+
+    if not (session_dir / "model.ply").is_file():
+        print(one_line(f"objscan scan: --export: {session_dir} holds no model.ply here (a remote or joined "
+                       "cell's session): run objscan export on it where it is"), file=sys.stderr)
+        return 1
+    try:
+        r = export_session(session_dir, session_dir / "export")
+    except ObjscanError as exc:
+        print(one_line(f"objscan scan: export failed: {exc.message} [{exc.code}]"), file=sys.stderr)
+        return 1
+    if not quiet:
+        console.print(f"exported to {session_dir / 'export'} in {r['seconds']:.1f} s: watertight "
+                      f"{r['watertight']}, {r['parts']} convex part(s), files: "
+                      + ", ".join(f for files in r["files"].values() for f in files[:1]))
+    return 0
 
 
 def _names_a_file(obj: str) -> bool:

@@ -27,6 +27,7 @@ COMMANDS = [
     "services.cli.cmd_scan",
     "services.cli.cmd_capture",
     "services.cli.cmd_reconstruct",
+    "services.cli.cmd_export",
     "services.cli.cmd_import",
     "services.cli.cmd_models",
     "services.cli.cmd_report",
@@ -34,7 +35,7 @@ COMMANDS = [
     "services.cli.cmd_certs",
     "services.cli.cmd_devices",
     "services.cli.cmd_calibrate",
-    "services.cli.cmd_ros2_bag",  # last: it offers 'export --ros2-bag' only when no export command exists
+    "services.cli.cmd_ros2_bag",
 ]
 
 

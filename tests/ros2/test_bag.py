@@ -135,7 +135,7 @@ def test_the_bag_reads_back_with_rosbags_every_message_counts_and_times_equal(se
 
 def test_the_bag_reads_back_with_mcap_ros2_support(session, tmp_path):
     out = tmp_path / "bag"
-    assert objscan(["export", str(session), "--ros2-bag", str(out), "--json"]) == 0  # the interface
+    assert objscan(["export", str(session), "--ros2-bag", str(out), "--json", "-"]) == 0
     want, src = _expected(session)
     got: dict[str, list[int]] = {}
     models = []
