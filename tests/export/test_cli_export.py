@@ -42,14 +42,14 @@ def test_export_of_a_folder_without_model_fails_on_one_line(tmp_path):
     (tmp_path / "s").mkdir()
     f = tmp_path / "err.json"
     r = objscan("export", str(tmp_path / "s"), "--out", str(tmp_path / "out"), "--json", str(f))
-    assert r.returncode == 1
+    assert r.returncode == 2  # bad input
     assert len(r.stderr.strip().splitlines()) == 1 and "[" in r.stderr
     assert json.loads(f.read_text())["error"]["code"] in ("no_model", "bad_session")
 
 
 def test_unknown_format_is_refused(session, tmp_path):
     r = objscan("export", str(session), "--out", str(tmp_path / "o"), "--format", "fbx")
-    assert r.returncode == 1 and "bad_argument" in r.stderr
+    assert r.returncode == 2 and "bad_argument" in r.stderr
 
 
 @pytest.mark.slow
