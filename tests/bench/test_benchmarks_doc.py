@@ -39,3 +39,12 @@ def test_every_file_in_bench_latest_is_named_by_a_section() -> None:
     named = {p.name for name in referenced() for p in files_for(name)}
     unnamed = sorted(p.name for p in LATEST.iterdir() if p.is_file() and p.name not in named)
     assert not unnamed, f"in bench/latest but named by no section of BENCHMARKS.md: {unnamed}"
+
+
+def test_the_results_page_stays_a_page_of_current_figures() -> None:
+    """BENCHMARKS.md holds the current figure of each benchmark, not their history: under 400 lines, and every
+    section names the command that produced it."""
+    text = (ROOT / "BENCHMARKS.md").read_text(encoding="utf-8")
+    assert len(text.splitlines()) < 400
+    sections = text.split("\n## ")[1:]
+    assert sections and all("objscan " in s or "python -m bench" in s for s in sections)
