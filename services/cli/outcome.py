@@ -36,7 +36,7 @@ INPUT_CODES = frozenset({
     "invalid_request", "bad_message", "bad_config", "bad_usage", "path_not_found", "invalid_config",
     "bad_session", "bad_recording", "bad_source", "out_not_empty", "object_not_found", "bad_mesh", "bad_argument",
     "model_not_found", "ambiguous_id", "not_a_library", "bad_network_config", "bad_value", "too_many_frames",
-    "no_frames",
+    "no_frames", "bad_robot_config",
 })
 """Error codes that mean the command was given something it cannot use (a missing path, a bad value): exit 2."""
 
