@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 
-from services.sim.demo_objects import MESH_FILE, demo_folder, demo_names
+from services.sim.demo_files import MESH_FILE
+from services.sim.demo_objects import demo_folder, demo_names
 from services.sim.errors import SimObjectError
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")

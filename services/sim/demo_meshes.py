@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from services.sim.demo_objects import MESH_FILE, MTL_FILE, TEXTURE_FILE
+from services.sim.demo_files import MESH_FILE, MTL_FILE, TEXTURE_FILE
 
 PX_PER_MM = 3.0  # texture resolution: 0.33 mm a texel, finer than the D435 sees at scan distance (~0.6 mm)
 ATLAS_WIDTH = 1024

@@ -19,11 +19,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-#: Where the generated files are kept: one folder per object, like the HOPE data.
-OBJECTS_DIR = Path(__file__).resolve().parent / "objects"
-MESH_FILE = "textured.obj"
-MTL_FILE = "textured.mtl"
-TEXTURE_FILE = "texture_map.png"
+from services.sim.demo_files import OBJECTS_DIR
+
 #: The object the twin starts with and the demo scans: present in every checkout.
 DEFAULT_OBJECT = "can"
 

@@ -34,7 +34,8 @@ from services.sim.catalogue import (
     named_in_folder,
     resolve_object,
 )
-from services.sim.demo_objects import OBJECTS_DIR, demo_folder, demo_names
+from services.sim.demo_files import OBJECTS_DIR
+from services.sim.demo_objects import demo_folder, demo_names
 from services.sim.errors import SimObjectError
 
 

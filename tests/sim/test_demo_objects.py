@@ -16,9 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from services.sim import demo_objects
+from services.sim import demo_files, demo_objects
 from services.sim.catalogue import load_object, resolve_object
-from services.sim.demo_objects import DEMO_OBJECTS, OBJECTS_DIR, demo_names
+from services.sim.demo_files import OBJECTS_DIR
+from services.sim.demo_objects import DEMO_OBJECTS, demo_names
 from services.sim.errors import SimObjectError
 from services.sim.gripper import GripperSpec
 from services.sim.object_roots import ObjectRoots
@@ -37,13 +38,13 @@ def test_a_fresh_process_generates_the_same_bytes(tmp_path):
     subprocess.run([sys.executable, "-m", "services.sim.demo_objects", "--out", str(tmp_path)], cwd=REPO, env=env,
                    check=True, capture_output=True, timeout=120)
     for name in DEMO_OBJECTS:
-        for file_name in (demo_objects.MESH_FILE, demo_objects.MTL_FILE, demo_objects.TEXTURE_FILE):
+        for file_name in (demo_files.MESH_FILE, demo_files.MTL_FILE, demo_files.TEXTURE_FILE):
             assert (tmp_path / name / file_name).read_bytes() == (OBJECTS_DIR / name / file_name).read_bytes(), \
                 (name, file_name)
     check = subprocess.run([sys.executable, "-m", "services.sim.demo_objects", "--out", str(tmp_path), "--check"],
                            cwd=REPO, capture_output=True, text=True, timeout=120)
     assert check.returncode == 0, check.stderr
-    (tmp_path / "can" / demo_objects.TEXTURE_FILE).write_bytes(b"not a png")
+    (tmp_path / "can" / demo_files.TEXTURE_FILE).write_bytes(b"not a png")
     check = subprocess.run([sys.executable, "-m", "services.sim.demo_objects", "--out", str(tmp_path), "--check"],
                            cwd=REPO, capture_output=True, text=True, timeout=120)
     assert check.returncode == 1 and "can" in check.stderr
@@ -56,7 +57,7 @@ def test_the_files_are_in_git_so_a_clone_and_git_archive_carry_them():
     if not tracked:
         pytest.skip("not a git checkout")
     for name in DEMO_OBJECTS:
-        for file_name in (demo_objects.MESH_FILE, demo_objects.MTL_FILE, demo_objects.TEXTURE_FILE):
+        for file_name in (demo_files.MESH_FILE, demo_files.MTL_FILE, demo_files.TEXTURE_FILE):
             assert f"services/sim/objects/{name}/{file_name}" in tracked
     assert {"services/sim/demo_meshes.py", "services/sim/demo_objects.py"} <= tracked
 
@@ -132,8 +133,8 @@ def test_the_twin_answers_the_same_for_absent_and_outside_names_and_lists_the_de
     assert "--object PATH" in message and "OBJSCAN_SIM_OBJECT_DIRS" in message
     for name in demo_names():  # a demo object needs no configuration: by name and by path in its folder
         assert roots.check(name) == name
-        assert roots.check(str(OBJECTS_DIR / name / demo_objects.MESH_FILE)) == str(
-            OBJECTS_DIR / name / demo_objects.MESH_FILE)
+        assert roots.check(str(OBJECTS_DIR / name / demo_files.MESH_FILE)) == str(
+            OBJECTS_DIR / name / demo_files.MESH_FILE)
 
 
 def test_an_object_folder_serves_its_objects_by_name(tmp_path, monkeypatch):
