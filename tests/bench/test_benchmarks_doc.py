@@ -48,3 +48,10 @@ def test_the_results_page_stays_a_page_of_current_figures() -> None:
     assert len(text.splitlines()) < 400
     sections = text.split("\n## ")[1:]
     assert sections and all("objscan " in s or "python -m bench" in s for s in sections)
+
+
+def test_the_results_name_no_folder_of_the_machine_that_measured_them() -> None:
+    """A figure's JSON says which session or file it came from by name, not by where it lay on one machine."""
+    machine_path = re.compile(r'"/(?:tmp|work|home|root)/')
+    offenders = [p.name for p in sorted(LATEST.glob("*.json")) if machine_path.search(p.read_text(encoding="utf-8"))]
+    assert offenders == []
