@@ -16,11 +16,13 @@ from typing import Any
 
 import numpy as np
 
+from common.geometry import invert
 from common.session_folder import atomic_write_json
 from services.export.collision import TOLERANCE_M, collision_parts
 from services.export.errors import ExportError, ExportInputError
 from services.export.frame import object_frame
-from services.export.inputs import SessionModel, load_session_model
+from services.export.inputs import PosedFrame, SessionModel, load_session_model
+from services.export.orient import orient_to_cameras
 from services.export.physics import inertial
 from services.export.surface import METHODS, SurfaceConfig, poisson_surface, to_object, tsdf_points
 from services.export.texture import bake_texture, vertex_coloured
@@ -54,19 +56,22 @@ def asset_name(model: SessionModel) -> str:
     return name or "object"
 
 
-def surface_mesh(model: SessionModel, T_model_object: np.ndarray, method: str, config: SurfaceConfig):  # noqa: ANN201
-    """The closed mesh (object frame) by ``method``."""
+def surface_mesh(model: SessionModel, T_model_object: np.ndarray, method: str, config: SurfaceConfig,
+                 frames: list[PosedFrame] | None = None):  # noqa: ANN201
+    """The closed mesh (object frame) by ``method``; ``frames``: the session's posed scans (read when None)."""
     if method not in METHODS:
         raise ExportInputError(f"surface method must be one of {list(METHODS)}, got {method!r}", code="bad_argument")
+    frames = model.frames() if frames is None else frames
     xyz, normals = to_object(T_model_object, model.xyz, model.normals)
     if method == "tsdf":
         margin = 0.01
         lo, hi = xyz.min(axis=0) - margin, xyz.max(axis=0) + margin
-        xyz, normals, rgb = tsdf_points(model.frames(), T_model_object, (lo, hi), config)
-        return poisson_surface(xyz, normals, rgb, config)
+        xyz, normals, rgb = tsdf_points(frames, T_model_object, (lo, hi), config)
+        return poisson_surface(xyz, normals, rgb, config, oriented=True)
     if normals is None:
         raise ExportInputError("the model has no normals (model.ply without normals)", code="bad_model")
-    return poisson_surface(xyz, normals, model.rgb, config)
+    normals, _ = orient_to_cameras(xyz, normals, frames, invert(T_model_object))
+    return poisson_surface(xyz, normals, model.rgb, config, oriented=True)
 
 
 def export_session(session: str | Path, out: str | Path, *, formats: tuple[str, ...] = FORMATS,
@@ -89,17 +94,17 @@ def export_session(session: str | Path, out: str | Path, *, formats: tuple[str, 
     model = load_session_model(session)
     name = asset_name(model)
     t = lap("read", t0)
+    frames = model.frames()
+    t = lap("frames", t)
     T_model_object = object_frame(model.xyz, model.table_normal, model.table_offset)
-    mesh = surface_mesh(model, T_model_object, method, config or SurfaceConfig())
+    mesh = surface_mesh(model, T_model_object, method, config or SurfaceConfig(), frames)
     t = lap("surface", t)
     tm = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.triangles), process=False)
     watertight, is_volume = bool(tm.is_watertight), bool(tm.is_volume)
     if not watertight:
         raise ExportError("the surface did not close (not watertight)", code="not_watertight",
                           detail={"session": str(session), "method": method})
-    frames = model.frames() if texture else []
-    t = lap("frames", t)
-    textured = bake_texture(mesh, frames, T_model_object) if frames else vertex_coloured(mesh)
+    textured = bake_texture(mesh, frames, T_model_object) if texture and frames else vertex_coloured(mesh)
     t = lap("texture", t)
     parts = collision_parts(mesh, tolerance_m)
     t = lap("collision", t)
@@ -117,7 +122,7 @@ def export_session(session: str | Path, out: str | Path, *, formats: tuple[str, 
         "session": str(session), "out": str(out), "name": name, "method": method,
         "watertight": watertight, "is_volume": is_volume,
         "vertices": int(len(textured.vertices)), "triangles": int(len(textured.triangles)),
-        "textured": bool(textured.textured), "texture_views": len(frames),
+        "textured": bool(textured.textured), "texture_views": len(frames) if texture else 0,
         "parts": len(parts.parts), "parts_method": parts.method,
         "parts_max_deviation_mm": round(1000.0 * parts.max_deviation_m, 3),
         "inertial": body.to_json(), "T_base_object": T_model_object.tolist(), "files": files,
