@@ -49,12 +49,12 @@ def run(sessions: list[Path], out: Path, methods: tuple[str, ...], save=None) ->
             try:
                 r = export_session(session, out / f"{session.name}_{method}", method=method)
             except ObjscanError as exc:
-                rows.append({"session": str(session), "method": method, "error": {"code": exc.code,
+                rows.append({"session": session.name, "method": method, "error": {"code": exc.code,
                                                                                    "message": exc.message}})
                 if save:
                     save(doc)
                 continue
-            row = {"object": r["name"], "session": str(session), "method": method, "load_before": round(load, 1),
+            row = {"object": r["name"], "session": session.name, "method": method, "load_before": round(load, 1),
                    **{k: r.get(k) for k in KEYS}}
             row["targets"] = targets(row)
             rows.append(row)
