@@ -116,7 +116,8 @@ def export_session(session: str | Path, out: str | Path, *, formats: tuple[str, 
     atomic_write_json(Path(session) / OBJECT_FRAME_FILE, {
         "T_base_object": T_model_object.tolist(), "frame": "base of view 0",
         "definition": "origin at the footprint centre on the table, z up along the table normal, "
-                      "x along the footprint's long side"})
+                      "x along the footprint's long side",
+        "export": str(out.resolve())})  # where the asset is: the model library stores it with the entry
     seconds = time.perf_counter() - t0
     result: dict[str, Any] = {
         "session": str(session), "out": str(out), "name": name, "method": method,
