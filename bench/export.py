@@ -23,7 +23,8 @@ from common.session_folder import atomic_write_json
 from services.export import METHODS, export_session
 
 KEYS = ("watertight", "is_volume", "mesh_chamfer_mm", "points_chamfer_mm", "volume_ratio", "parts",
-        "parts_max_deviation_mm", "seconds", "cpu_seconds", "triangles", "textured", "timings_s", "evaluation_seconds")
+        "parts_max_deviation_mm", "seconds", "cpu_seconds", "cpu_wait_seconds", "triangles", "textured", "timings_s",
+        "evaluation_seconds")
 
 
 def targets(r: dict[str, Any]) -> dict[str, bool]:
