@@ -23,7 +23,8 @@ from common.session_folder import atomic_write_json
 from services.export import METHODS, export_session
 
 KEYS = ("watertight", "is_volume", "mesh_chamfer_mm", "points_chamfer_mm", "volume_ratio", "parts",
-        "parts_max_deviation_mm", "seconds", "cpu_seconds", "triangles", "textured", "timings_s", "evaluation_seconds")
+        "parts_max_deviation_mm", "seconds", "cpu_seconds", "cpu_wait_seconds", "triangles", "textured", "timings_s",
+        "evaluation_seconds")
 
 
 def targets(r: dict[str, Any]) -> dict[str, bool]:
@@ -49,12 +50,12 @@ def run(sessions: list[Path], out: Path, methods: tuple[str, ...], save=None) ->
             try:
                 r = export_session(session, out / f"{session.name}_{method}", method=method)
             except ObjscanError as exc:
-                rows.append({"session": str(session), "method": method, "error": {"code": exc.code,
+                rows.append({"session": session.name, "method": method, "error": {"code": exc.code,
                                                                                    "message": exc.message}})
                 if save:
                     save(doc)
                 continue
-            row = {"object": r["name"], "session": str(session), "method": method, "load_before": round(load, 1),
+            row = {"object": r["name"], "session": session.name, "method": method, "load_before": round(load, 1),
                    **{k: r.get(k) for k in KEYS}}
             row["targets"] = targets(row)
             rows.append(row)

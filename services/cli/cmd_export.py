@@ -82,6 +82,9 @@ def run(args) -> int:  # noqa: ANN001
 
             _write_json(Path(args.json_file), {"error": error_payload(exc)})
         return code
+    entry = store_with_library_entry(Path(args.session), "export")
+    if entry:
+        result["library_entry"] = entry
     if args.json_file:
         if to_stdout:
             print(json.dumps(result, default=str))
@@ -89,6 +92,21 @@ def run(args) -> int:  # noqa: ANN001
             _write_json(Path(args.json_file), result)
     _say(result)
     return OK
+
+
+def store_with_library_entry(session: Path, command: str) -> str | None:
+    """The export's mesh and asset stored with the library entry the acquisition made (if it made one).
+
+    The files are written either way: a library that cannot take them costs a warning line, not the export.
+    """
+    from services.library import attach_session_export
+
+    try:
+        return attach_session_export(session)
+    except ObjscanError as exc:
+        print(one_line(f"objscan {command}: WARNING: the export is not stored with the library entry: "
+                       f"{exc.message} [{exc.code}]"), file=sys.stderr)
+        return None
 
 
 def _write_json(path: Path, doc: dict[str, Any]) -> None:

@@ -25,6 +25,12 @@ TOLERANCE_M = 0.002
 COACD_THRESHOLDS = (0.05,)
 #: Most parts CoACD may make (MuJoCo collides every pair: few parts keep the contacts cheap).
 MAX_PARTS = 12
+#: CoACD decomposes a copy decimated to about this many triangles, with a coarser search than the twin's
+#: (``COACD_EFFORT``): on the 20,000-triangle tomato-sauce can the full mesh took 27 s of CPU and its parts
+#: stood out 6.4 mm; the decimated copy with these settings took 6 s and 4.0 mm (parts are checked against
+#: the full mesh either way).
+COACD_TRIANGLES = 3000
+COACD_EFFORT = {"preprocess_resolution": 20, "mcts_iterations": 30, "resolution": 500}
 
 
 @dataclass
@@ -77,9 +83,12 @@ def collision_parts(mesh: o3d.geometry.TriangleMesh, tolerance_m: float = TOLERA
     if dev <= tolerance_m or not have_coacd():
         return CollisionParts(parts, "hull", dev)
     best = CollisionParts(parts, "hull", dev)
+    coarse = mesh.simplify_quadric_decimation(COACD_TRIANGLES) if len(t) > COACD_TRIANGLES else mesh
+    cv = np.asarray(coarse.vertices, dtype=np.float64)
+    ct = np.asarray(coarse.triangles, dtype=np.int32)
     for threshold in COACD_THRESHOLDS:
-        params = {**COACD_PARAMS, "threshold": threshold, "max_convex_hull": MAX_PARTS}
-        parts, method = convex_parts(v, t, method="coacd", params=params)
+        params = {**COACD_PARAMS, **COACD_EFFORT, "threshold": threshold, "max_convex_hull": MAX_PARTS}
+        parts, method = convex_parts(cv, ct, method="coacd", params=params)
         dev = deviation(parts, mesh)
         if dev < best.max_deviation_m:
             best = CollisionParts(parts, method, dev)

@@ -25,6 +25,7 @@ from common.geometry import invert, rotate_vectors, transform_points
 from services.export.cap import cap_points, flatten_bottom, footprint_outline
 from services.export.errors import ExportError
 from services.export.inputs import PosedFrame
+from services.export.orient import orient_outward
 
 METHODS = ("poisson", "tsdf")
 #: Points closer to the table than this (m) are the table's, not the object's (the static stage's own cut).
@@ -44,33 +45,19 @@ class SurfaceConfig:
     tsdf_depth_max_m: float = 1.0
 
 
-def orient_outward(xyz: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """Normals flipped to point away from the object's vertical axis (through the points' centroid).
-
-    The model's normals are estimated per view and may point either way; for objects that are star-shaped
-    about their vertical axis (boxes, cans, bottles) away-from-the-axis is outward. Top faces (normals
-    nearly vertical) point up.
-    """
-    n = np.array(normals, dtype=np.float64, copy=True)
-    c = xyz.mean(axis=0)
-    radial = xyz - c
-    radial[:, 2] = 0.0
-    vertical = np.abs(n[:, 2]) > 0.9
-    up_wanted = np.where(xyz[:, 2] > c[2], 1.0, -1.0)
-    out = np.where(vertical, np.sign(n[:, 2]) * up_wanted, np.sign(np.einsum("ij,ij->i", n, radial)))
-    n[out < 0] *= -1.0
-    return n
-
-
 def poisson_surface(xyz: np.ndarray, normals: np.ndarray, rgb: np.ndarray | None,
-                    config: SurfaceConfig = SurfaceConfig()) -> o3d.geometry.TriangleMesh:
-    """Closed mesh (object frame) of object-frame points with outward normals, the footprint cap added."""
+                    config: SurfaceConfig = SurfaceConfig(), *, oriented: bool = False) -> o3d.geometry.TriangleMesh:
+    """Closed mesh (object frame) of object-frame points, the footprint cap added.
+
+    ``oriented``: the normals already point outward (turned towards the scans, or a TSDF's gradient); else
+    they are turned away from the object's vertical axis (``orient.orient_outward``).
+    """
     keep = xyz[:, 2] > TABLE_CUT_M * 0.5
     xyz, normals = xyz[keep], normals[keep]
     rgb = None if rgb is None else rgb[keep]
     cap_xyz, cap_n = cap_points(footprint_outline(xyz), config.cap_spacing_m)
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.vstack([xyz, cap_xyz])))
-    pcd.normals = o3d.utility.Vector3dVector(np.vstack([orient_outward(xyz, normals), cap_n]))
+    pcd.normals = o3d.utility.Vector3dVector(np.vstack([normals if oriented else orient_outward(xyz, normals), cap_n]))
     if rgb is not None:
         # the cap is unseen: it takes the colour of the nearest seen point (the base's lowest band)
         near = cKDTree(xyz).query(cap_xyz)[1]
@@ -205,12 +192,20 @@ def close_holes(mesh: o3d.geometry.TriangleMesh, attempts: int = 4) -> o3d.geome
 
 def tsdf_points(frames: list[PosedFrame], T_model_object: np.ndarray, bounds_object: tuple[np.ndarray, np.ndarray],
                 config: SurfaceConfig = SurfaceConfig()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The TSDF-fused surface of ``frames`` inside ``bounds_object`` (object frame): xyz, normals, rgb (uint8)."""
+    """The TSDF-fused surface of ``frames`` inside ``bounds_object`` (object frame): xyz, outward normals
+    (the signed distance's gradient), rgb (uint8).
+
+    A uniform volume: a cube over the bounds at ``tsdf_voxel_m`` (Open3D's scalable, hashed volume integrates
+    nothing in the 0.20 build used here: its extraction returns no points even for a flat wall in front of
+    the camera).
+    """
     if not frames:
         raise ExportError("the session has no registered frames to fuse", code="no_frames")
-    volume = o3d.pipelines.integration.ScalableTSDFVolume(
-        voxel_length=config.tsdf_voxel_m, sdf_trunc=config.tsdf_trunc_m,
-        color_type=o3d.pipelines.integration.TSDFVolumeColorType.RGB8)
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds_object)
+    length = float((hi - lo).max())
+    volume = o3d.pipelines.integration.UniformTSDFVolume(
+        length=length, resolution=int(np.ceil(length / config.tsdf_voxel_m)), sdf_trunc=config.tsdf_trunc_m,
+        color_type=o3d.pipelines.integration.TSDFVolumeColorType.RGB8, origin=lo.reshape(3, 1))
     T_object_model = invert(T_model_object)
     for pf in frames:
         f = pf.frame
@@ -219,20 +214,20 @@ def tsdf_points(frames: list[PosedFrame], T_model_object: np.ndarray, bounds_obj
         rgbd = o3d.geometry.RGBDImage.create_from_color_and_depth(
             o3d.geometry.Image(np.ascontiguousarray(f.color)), o3d.geometry.Image(np.ascontiguousarray(f.depth)),
             depth_scale=1.0 / f.depth_scale, depth_trunc=config.tsdf_depth_max_m, convert_rgb_to_intensity=False)
-        volume.integrate(rgbd, intr, invert(T_object_model @ pf.T_model_camera))
+        volume.integrate(rgbd, intr, np.ascontiguousarray(invert(T_object_model @ pf.T_model_camera)))
     pcd = volume.extract_point_cloud()
     xyz = np.asarray(pcd.points)
-    lo, hi = bounds_object
     inside = np.all((xyz >= lo) & (xyz <= hi), axis=1) & (xyz[:, 2] > TABLE_CUT_M)
-    normals = np.asarray(pcd.normals)[inside] if pcd.has_normals() else None
     pts = xyz[inside]
     if len(pts) < 100:
         raise ExportError("the fused volume holds almost nothing inside the model's bounds", code="no_surface",
                           detail={"points": int(len(pts))})
-    if normals is None:
+    if pcd.has_normals():
+        normals = np.asarray(pcd.normals)[inside]
+    else:
         p = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
         p.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.005, max_nn=30))
-        normals = np.asarray(p.normals)
+        normals = orient_outward(pts, np.asarray(p.normals))
     rgb = np.clip(np.asarray(pcd.colors)[inside] * 255.0 + 0.5, 0, 255).astype(np.uint8)
     return pts, normals, rgb
 

@@ -24,11 +24,10 @@ import open3d as o3d
 
 from common.geometry import invert, transform_points
 from services.export.inputs import PosedFrame
+from services.export.visibility import camera_in_object, seen_by
 
 #: Texels per atlas cell side (one triangle per cell).
 CELL = 8
-#: A triangle's centroid counts as seen by a scan when its depth agrees within this (m).
-VISIBLE_TOL_M = 0.004
 
 
 @dataclass
@@ -83,19 +82,9 @@ def best_views(centroids: np.ndarray, normals: np.ndarray, frames: list[PosedFra
     best = np.full(len(centroids), -1, dtype=np.int64)
     score = np.full(len(centroids), 0.2)  # grazing views (cos < 0.2) are never used
     for f_idx, pf in enumerate(frames):
-        T_cam_object = invert(T_object_model @ pf.T_model_camera)
-        p = transform_points(T_cam_object, centroids)
-        z = p[:, 2]
-        K = pf.frame.intrinsics
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = np.round(K.fx * p[:, 0] / z + K.cx).astype(np.int64)
-            v = np.round(K.fy * p[:, 1] / z + K.cy).astype(np.int64)
-        ok = (z > 0.05) & (u >= 0) & (u < K.width) & (v >= 0) & (v < K.height)
-        d = np.zeros(len(z))
-        d[ok] = pf.frame.depth[v[ok], u[ok]] * pf.frame.depth_scale
-        ok &= (d > 0) & (np.abs(d - z) < VISIBLE_TOL_M)
-        cam_centre = invert(T_cam_object)[:3, 3]
-        ray = cam_centre - centroids
+        T_object_camera = camera_in_object(pf, T_object_model)
+        ok = seen_by(centroids, pf, T_object_camera)
+        ray = T_object_camera[:3, 3] - centroids
         cos = np.einsum("ij,ij->i", normals, ray) / np.maximum(np.linalg.norm(ray, axis=1), 1e-12)
         better = ok & (cos > score)
         best[better], score[better] = f_idx, cos[better]

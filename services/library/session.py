@@ -15,8 +15,10 @@ from typing import Any
 from common.atomic import sha256_file
 from services.library.errors import BadModelInput
 from services.library.metadata import ModelMetadata
-from services.library.store import ModelLibrary
+from services.library.store import MESH_FILE, ModelEntry, ModelLibrary
 
+#: Where the export says which folder it wrote (services/export/pipeline.py writes it).
+OBJECT_FRAME_FILE = "object_frame.json"
 ACCURACY_KEYS = ("chamfer_mm", "accuracy_mm", "completeness_mm", "fscore_2mm", "fscore_5mm")
 
 
@@ -58,22 +60,78 @@ def session_metadata(session_dir: str | Path) -> ModelMetadata:
                "views": len(info.get("views", [])), "model_sha256": sha256_file(model)})
 
 
-def add_session_model(library_root: str | Path, session_dir: str | Path, *, allow_unaccepted: bool = False) -> str:
-    """Add ``session_dir/model.ply`` (with ``mesh.ply`` when the session has one) to the library; returns its id.
+def session_export(session_dir: str | Path) -> tuple[Path | None, Path | None]:
+    """The session's exported mesh (``mesh.ply``, model frame) and asset folder, each None when not there.
 
-    Idempotent per (session, model file): a second call returns the id stored the first time. A model whose
+    The export writes ``SESSION/mesh.ply`` and names its output folder in ``SESSION/object_frame.json``
+    (``export``); a folder that has moved since, or holds no ``export.json``, is not an asset.
+    """
+    session = Path(session_dir)
+    mesh = session / MESH_FILE
+    frame = _json(session / OBJECT_FRAME_FILE)
+    asset = Path(frame["export"]) if isinstance(frame.get("export"), str) else None
+    if asset is not None and not asset.is_absolute():
+        asset = session / asset
+    return (mesh if mesh.is_file() else None,
+            asset if asset is not None and (asset / "export.json").is_file() else None)
+
+
+def add_session_model(library_root: str | Path, session_dir: str | Path, *, allow_unaccepted: bool = False) -> str:
+    """Add ``session_dir/model.ply`` (with the export's mesh and asset when the session has them) to the
+    library; returns its id.
+
+    Idempotent per (session, model file): a second call returns the id stored the first time, after storing
+    with it the mesh and asset the session gained since (exported after it was added). A model whose
     report says ``accepted: false`` is refused (``UnacceptedModel``) unless ``allow_unaccepted``.
     """
     lib = ModelLibrary(library_root)
     meta = session_metadata(session_dir)
+    mesh, asset = session_export(session_dir)
     for entry in lib.list(meta.object_name):
         if entry.metadata.session == meta.session and \
                 entry.metadata.extra.get("model_sha256") == meta.extra["model_sha256"]:
+            _attach_newer(lib, entry, mesh, asset)
             return entry.id
-    session = Path(session_dir)
-    mesh = session / "mesh.ply"
-    return lib.add(session / "model.ply", meta, mesh=mesh if mesh.is_file() else None,
+    return lib.add(Path(session_dir) / "model.ply", meta, mesh=mesh, asset=asset,
                    allow_unaccepted=allow_unaccepted)
+
+
+def session_library_entry(session_dir: str | Path) -> tuple[Path, str] | None:
+    """(library root, entry id) the acquisition stored this session's model in, from its journal; else None."""
+    journal = _json(Path(session_dir) / "journal.json")
+    entry = journal.get("library_entry")
+    if not entry:
+        return None
+    for d in reversed(journal.get("decisions") or []):
+        if isinstance(d, dict) and d.get("entry") == entry and d.get("library"):
+            return Path(d["library"]), str(entry)
+    return None
+
+
+def attach_session_export(session_dir: str | Path) -> str | None:
+    """Store the session's export (mesh and asset) with the library entry its acquisition made; its id, or
+    None when the acquisition stored no entry (no library, an unaccepted model) or the session has no export.
+    """
+    found = session_library_entry(session_dir)
+    mesh, asset = session_export(session_dir)
+    if found is None or (mesh is None and asset is None):
+        return None
+    root, entry_id = found
+    lib = ModelLibrary(root)
+    entry = lib.get(entry_id)
+    _attach_newer(lib, entry, mesh, asset)
+    return entry.id
+
+
+def _attach_newer(lib: ModelLibrary, entry: ModelEntry, mesh: Path | None, asset: Path | None) -> None:
+    """Attach what the entry lacks or holds in an older version (by content: mesh digest, asset figures)."""
+    new_mesh = mesh if mesh is not None and (
+        entry.mesh_path is None or sha256_file(entry.mesh_path) != sha256_file(mesh)) else None
+    new_asset = asset if asset is not None and (
+        entry.asset_path is None or not (entry.asset_path / "export.json").is_file()
+        or sha256_file(entry.asset_path / "export.json") != sha256_file(asset / "export.json")) else None
+    if new_mesh is not None or new_asset is not None:
+        lib.attach(entry.id, mesh=new_mesh, asset=new_asset)
 
 
 def _json(path: Path) -> dict[str, Any]:

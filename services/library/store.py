@@ -6,7 +6,8 @@ Layout under ``root``::
     index.sqlite                 one row per model (id, object, date, session, configuration, metadata JSON)
     .lock                        fcntl lock: one writer (or reconciler) at a time, across processes
     entries/<id>/model.ply       the model point cloud (binary PLY, colors and normals when known)
-    entries/<id>/mesh.ply        optional surface mesh
+    entries/<id>/mesh.ply        optional surface mesh (the export's closed mesh, in the model's frame)
+    entries/<id>/asset/          optional simulation asset (the export's folder: MJCF, URDF, GLB, ...)
     entries/<id>/descriptors.npz GOOD of the whole model and of its synthetic partial views (for ``find``)
     entries/<id>/metadata.json   written last: id, metadata, and the size + SHA-256 of every other file
     .staging/<id>.<pid>/         an ``add`` in progress
@@ -29,6 +30,11 @@ marks it), or already is one (the marker, or an older library's ``index.sqlite``
 gets the marker). Anything else is refused with ``not_a_library`` before a single file is touched. The
 tidy-up removes only names the library itself creates (``<entry id>`` and ``<entry id>.<pid>``); anything
 else found under ``entries/``, ``.staging/``, ``.trash/`` is left alone and listed in ``foreign``.
+
+- ``attach`` (a mesh or an asset for an entry that exists, e.g. exported after the scan stored it) writes
+  the new files into the entry under temporary names and renames each into place (a reader never sees a
+  half file), then replaces ``metadata.json`` (write, fsync, rename: its commit point) and updates the row.
+  A crash before the metadata leaves files the entry does not list (harmless, replaced by the next attach).
 
 So a crash before the rename leaves nothing (the add never happened); a crash after it leaves an entry that
 the next open indexes (the add happened; only the index lagged); there is never an orphan folder nor a row
@@ -75,6 +81,7 @@ TRASH = ".trash"
 LOCK = ".lock"
 MODEL_FILE = "model.ply"
 MESH_FILE = "mesh.ply"
+ASSET_DIR = "asset"
 DESCRIPTORS_FILE = "descriptors.npz"
 METADATA_FILE = "metadata.json"
 MARKER = "library.json"
@@ -109,6 +116,11 @@ class ModelEntry:
         p = self.path / MESH_FILE
         return p if p.is_file() else None
 
+    @property
+    def asset_path(self) -> Path | None:
+        p = self.path / ASSET_DIR
+        return p if p.is_dir() else None
+
     def summary(self) -> dict[str, Any]:
         """The short JSON-able form ``models list`` prints."""
         q = self.metadata.quality
@@ -116,7 +128,7 @@ class ModelEntry:
                 "created": time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(self.metadata.created)),
                 "points": self.points, "configuration": self.metadata.configuration,
                 "chamfer_mm": q.get("chamfer_mm"), "session": self.metadata.session,
-                "mesh": self.mesh_path is not None}
+                "mesh": self.mesh_path is not None, "asset": self.asset_path is not None}
 
 
 @dataclass
@@ -161,13 +173,15 @@ class ModelLibrary:
 
     # ------------------------------------------------------------------------------------------ public
     def add(self, model_ply: ModelInput, metadata: ModelMetadata | dict[str, Any], *,
-            mesh: str | Path | o3d.geometry.TriangleMesh | None = None, allow_unaccepted: bool = False) -> str:
+            mesh: str | Path | o3d.geometry.TriangleMesh | None = None, asset: str | Path | None = None,
+            allow_unaccepted: bool = False) -> str:
         """Store a model (a PLY path, a wire ``PointCloud``, an Open3D cloud or an (N, 3) array); returns its id.
 
         The GOOD descriptors are computed here (whole model + synthetic views) and the whole-model one is
         copied into ``metadata.descriptor``. Raises ``BadModelInput`` for an empty, NaN or unreadable model,
         and ``UnacceptedModel`` for one whose ``metadata.quality["accepted"]`` is ``False`` (the dynamic stage
         did not accept it) unless ``allow_unaccepted``: a wrong model in the library would be matched against.
+        ``asset``: a folder (the export's) copied as the entry's ``asset/``.
         """
         meta = metadata if isinstance(metadata, ModelMetadata) else ModelMetadata.from_dict(metadata)
         meta.validate()
@@ -193,6 +207,8 @@ class ModelLibrary:
                          DESCRIPTORS_FILE: _write_npz(stage / DESCRIPTORS_FILE, desc)}
                 if mesh_obj is not None:
                     files[MESH_FILE] = _write_mesh(stage / MESH_FILE, mesh_obj)
+                if asset is not None:
+                    files.update(_copy_asset(Path(asset), stage / ASSET_DIR))
                 self._fault("files_written")
                 record = {"id": entry_id, "points": len(pcd.points), "files": files, "metadata": meta.to_dict()}
                 _write_synced(stage / METADATA_FILE, json.dumps(record, indent=2, default=json_default).encode())
@@ -216,6 +232,44 @@ class ModelLibrary:
                 self._remove_entry(entry_id, hooks=False)
                 raise
         return entry_id
+
+    def attach(self, entry_id: str, *, mesh: str | Path | o3d.geometry.TriangleMesh | None = None,
+               asset: str | Path | None = None) -> ModelEntry:
+        """Store ``mesh`` (as ``mesh.ply``) and/or the folder ``asset`` (as ``asset/``) with an existing entry.
+
+        For a model exported after it was stored (``objscan scan --export``: the acquisition adds the model,
+        the export follows). What was attached before is replaced. Crash rule in the module doc.
+        """
+        mesh_obj = _load_mesh(mesh) if mesh is not None else None
+        if asset is not None and not Path(asset).is_dir():
+            raise BadModelInput(f"asset {asset} is not a folder", detail={"asset": str(asset)})
+        with self._locked():
+            full = self._row_for(entry_id)[0]
+            folder = self.root / ENTRIES / full
+            record = json.loads((folder / METADATA_FILE).read_text())
+            files = dict(record["files"])
+            tag = f".{os.getpid()}.tmp"
+            if mesh_obj is not None:
+                tmp = folder / f".{os.getpid()}.tmp.{MESH_FILE}"  # Open3D writes by the extension
+                files[MESH_FILE] = _write_mesh(tmp, mesh_obj)
+                os.replace(tmp, folder / MESH_FILE)
+            if asset is not None:
+                tmp = folder / (ASSET_DIR + tag)
+                shutil.rmtree(tmp, ignore_errors=True)
+                copied = _copy_asset(Path(asset), tmp)
+                old = folder / (ASSET_DIR + f".{os.getpid()}.old")
+                if (folder / ASSET_DIR).exists():
+                    os.rename(folder / ASSET_DIR, old)
+                os.rename(tmp, folder / ASSET_DIR)
+                shutil.rmtree(old, ignore_errors=True)
+                files = {k: v for k, v in files.items() if not k.startswith(ASSET_DIR + "/")} | {
+                    ASSET_DIR + k[len(tmp.name):]: v for k, v in copied.items()}
+            fsync_dir(folder)
+            record["files"] = files
+            atomic_write_bytes(folder / METADATA_FILE, json.dumps(record, indent=2, default=json_default).encode())
+            with self._transaction() as db:
+                db.execute("UPDATE models SET has_mesh = ? WHERE id = ?", (int(MESH_FILE in files), full))
+        return self.get(full)
 
     def list(self, object_name: str | None = None) -> list[ModelEntry]:
         """Every stored model (oldest first), optionally only those of one object name."""
@@ -514,6 +568,23 @@ def _write_mesh(path: Path, mesh: o3d.geometry.TriangleMesh) -> dict[str, Any]:
     if not o3d.io.write_triangle_mesh(str(path), mesh, write_ascii=False):
         raise LibraryError(f"could not write {path}", code="io_error")
     return _fsync_file(path)
+
+
+def _copy_asset(src: Path, dest: Path) -> dict[str, dict[str, Any]]:
+    """Copy the asset folder ``src`` to ``dest`` (synced); the records of its files, named ``<dest name>/...``."""
+    if not src.is_dir():
+        raise BadModelInput(f"asset {src} is not a folder", detail={"asset": str(src)})
+    try:
+        shutil.copytree(src, dest)
+    except OSError as exc:
+        raise LibraryError(f"cannot copy the asset {src}: {exc}", code="io_error") from None
+    out = {}
+    for p in sorted(dest.rglob("*")):
+        if p.is_file():
+            out[f"{dest.name}/{p.relative_to(dest).as_posix()}"] = _fsync_file(p)
+    for d in sorted({p.parent for p in dest.rglob("*")} | {dest}, key=lambda q: -len(q.parts)):
+        fsync_dir(d)
+    return out
 
 
 def _write_npz(path: Path, desc: dict[str, Any]) -> dict[str, Any]:

@@ -26,7 +26,8 @@ from services.report.raster import RasterCamera, colormap, orbit_camera, png_dat
 from services.report.session_data import SessionData, ViewData, ground_truth_points, load_session
 from services.report.viewer import CSS as VIEWER_CSS
 from services.report.viewer import MAX_POINTS as VIEWER_POINTS
-from services.report.viewer import viewer_html
+from services.report.viewer import MAX_TRIANGLES as MESH_TRIANGLES
+from services.report.viewer import mesh_viewer_html, viewer_html
 
 
 @dataclass(frozen=True)
@@ -175,9 +176,32 @@ def _model(s: SessionData, cfg: ReportConfig, rng: np.random.Generator, errors: 
     else:
         interactive = viewer_html(xyz, rgb, caption="drag to turn, wheel to zoom", seed=cfg.seed)
         note = ""
+    mesh = _mesh_viewer(s)
+    if mesh:
+        interactive = f"<div class='row'><div>{interactive}</div><div>{mesh}</div></div>"
     return (head + f"<p>{len(s.model)} points. Turn and zoom it here (up to {VIEWER_POINTS} points, drawn by"
-            f" the page itself, offline):</p>{note}{interactive}<p>Rendered on the CPU:</p>"
-            f"<div class='row'>{images}</div></section>")
+            f" the page itself, offline){', beside the exported closed mesh' if mesh else ''}:</p>{note}"
+            f"{interactive}<p>Rendered on the CPU:</p><div class='row'>{images}</div></section>")
+
+
+def _mesh_viewer(s: SessionData) -> str:
+    """The exported closed mesh (``SESSION/mesh.ply``, ``objscan export``) in the viewer; '' without one."""
+    import open3d as o3d
+
+    path = s.path / "mesh.ply"
+    if not path.is_file():
+        return ""
+    mesh = o3d.io.read_triangle_mesh(str(path))
+    if len(mesh.triangles) == 0:
+        return ""
+    if len(mesh.triangles) > MESH_TRIANGLES:
+        mesh = mesh.simplify_quadric_decimation(MESH_TRIANGLES)
+    tri = np.asarray(mesh.triangles)
+    rgb = None
+    if mesh.has_vertex_colors():
+        rgb = np.clip(np.asarray(mesh.vertex_colors)[tri].mean(axis=1) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    return mesh_viewer_html(np.asarray(mesh.vertices), tri, rgb,
+                            caption=f"the exported mesh: {len(tri)} triangles, closed (objscan export)")
 
 
 def _graph(s: SessionData) -> str:

@@ -1,8 +1,10 @@
-"""A small session folder made without the twin: a coloured box on a table, scanned from a ring of cameras.
+"""A small session folder made without the twin: a coloured object on a table, scanned from a ring of cameras.
 
 The export reads only files (model.ply, report.json, view.json, the scans), so a ray-cast session exercises
-it end to end in seconds. The box stands at a known pose with a known yaw, so the object frame, the volume
-and the inertia have exact answers; ``T_base_object_true`` rides along as the twin records it.
+it end to end in seconds. The object (a box, or any closed mesh) stands at a known pose with a known yaw, so
+the object frame, the volume and the inertia have exact answers; ``T_base_object_true`` rides along as the
+twin records it. The model's normals are fitted to each point's neighbours without a sign, as the
+acquisition's are.
 """
 
 from __future__ import annotations
@@ -29,16 +31,35 @@ def box_mesh(size: tuple[float, float, float]) -> o3d.geometry.TriangleMesh:
     return box
 
 
+def recessed_box_mesh(size: tuple[float, float, float], rim_m: float, recess_m: float) -> o3d.geometry.TriangleMesh:
+    """A box whose top is a pocket ``recess_m`` deep inside a rim ``rim_m`` wide (a can's recessed lid, squared)."""
+    import trimesh
+
+    sx, sy, sz = size
+    outer = trimesh.creation.box((sx, sy, sz))
+    pocket = trimesh.creation.box((sx - 2 * rim_m, sy - 2 * rim_m, 2 * recess_m))
+    pocket.apply_translation((0.0, 0.0, sz / 2))
+    solid = outer.difference(pocket)
+    solid.apply_translation((0.0, 0.0, sz / 2))
+    return o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.asarray(solid.vertices, dtype=np.float64)),
+                                     o3d.utility.Vector3iVector(np.asarray(solid.faces, dtype=np.int32)))
+
+
 def make_box_session(root: Path, size: tuple[float, float, float] = (0.08, 0.05, 0.12),
                      position: tuple[float, float] = (0.55, 0.03), yaw_deg: float = 20.0,
-                     cameras: int = 8, width: int = 160, height: int = 120) -> tuple[Path, np.ndarray]:
-    """Write the session into ``root``; returns (session path, true T_base_object)."""
+                     cameras: int = 8, width: int = 160, height: int = 120,
+                     mesh: o3d.geometry.TriangleMesh | None = None) -> tuple[Path, np.ndarray]:
+    """Write the session into ``root``; returns (session path, true T_base_object).
+
+    ``mesh``: the object in its own frame (footprint centre at the origin, z up) instead of a box of ``size``
+    (``size`` then only places the cameras: they look at half its height).
+    """
     root = Path(root)
     yaw = np.radians(yaw_deg)
     T = np.eye(4)
     T[:3, :3] = [[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]]
     T[:2, 3] = position
-    box = box_mesh(size)
+    box = box_mesh(size) if mesh is None else o3d.geometry.TriangleMesh(mesh)
     box.transform(T)
     scene = o3d.t.geometry.RaycastingScene()
     box_id = scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(box))
