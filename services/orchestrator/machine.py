@@ -812,7 +812,7 @@ class Acquisition:
 
     async def _evaluate(self, model_xyz: np.ndarray) -> dict[str, Any]:
         """Chamfer/F-score against the twin's ground-truth surface, posed as the object stood in view 0."""
-        from services.registration.evaluation import evaluate_model
+        from services.registration.api import evaluate_model
 
         first = self.store.load_scan(0, 0)
         T0 = first.meta.get("T_base_object_true")

@@ -75,21 +75,37 @@ _EXPORTS: dict[str, str] = {
                      "from_o3d", "o3d_seeded", "read_ply", "to_o3d", "transform_cloud", "write_ply"), "cloud"),
     **dict.fromkeys(("ColorICPConfig", "FeatureMatchConfig", "colored_icp", "fpfh_features", "mean_spacing",
                      "overlap_only", "ransac_feature_match"), "blocks"),
+    # the dynamic stage's steps, for the benchmarks that measure one step alone (pair_yaw, turns,
+    # global_registration): the same functions ``build_model`` runs
+    **dict.fromkeys(("global_register", "refine_icp"), "dynamic.global_registration"),
+    **dict.fromkeys(("attach_regions", "fit_palette", "neighbour_edges", "preprocess", "quantize"),
+                    "dynamic.preprocess"),
+    **dict.fromkeys(("fast_local", "global_align", "tilt_deg"), "dynamic.pair"),
+    **dict.fromkeys(("chain_to_first", "make_pair_jobs"), "dynamic.model"),
+    "loop_closure_error": "dynamic.combine",
+    "CONFIGURATIONS": "dynamic.configurations",
+    "YawRefineConfig": "dynamic.yaw_refine",
+}
+# public name -> (module, its name there): steps whose name inside the pair registration is private
+_ALIASES: dict[str, tuple[str, str]] = {
+    "pair_score_key": ("dynamic.pair", "_score_key"),  # how a pair candidate is ranked (fitness, colour)
+    "pair_evaluation_clouds": ("dynamic.pair", "_evaluation_clouds"),  # the scorer a job's candidates share
+    "pair_turn_stage": ("dynamic.pair", "_turn_stage"),  # the 4-DoF turn search stage of one job
 }
 
 
 def __getattr__(name: str) -> Any:
     """Resolve an exported name from its internal module on first use (then cached in this module)."""
-    where = _EXPORTS.get(name)
+    where, attr = (_EXPORTS[name], name) if name in _EXPORTS else _ALIASES.get(name, (None, name))
     if where is None:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{_HOME}.{where}"), name)
+    value = getattr(importlib.import_module(f"{_HOME}.{where}"), attr)
     globals()[name] = value
     return value
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
+    return sorted(set(globals()) | set(_EXPORTS) | set(_ALIASES))
 
 
 # ------------------------------------------------------------------------------------------------ static stage
@@ -221,6 +237,6 @@ def dynamic_configurations(config: dict) -> list[str]:
     return configuration_names(dynamic_config(config))
 
 
-__all__ = sorted({*_EXPORTS, "EdgeJob", "dynamic_config", "dynamic_configurations", "edge_jobs",
+__all__ = sorted({*_EXPORTS, *_ALIASES, "EdgeJob", "dynamic_config", "dynamic_configurations", "edge_jobs",
                   "edge_views_needed", "model_cloud", "register_scans", "session_dynamic_config",
                   "static_config", "view_from_result", "view_result", "views_from_results"})

@@ -49,8 +49,7 @@ class PairCell:
         self.dynamic_config: dict | None = None
 
     async def register_pair(self, msg):  # noqa: ANN001, ANN201
-        from services.registration.dynamic.pair import PairResult
-        from services.registration.pair_wire import pair_job_from_message, pair_result_message
+        from services.registration.api import PairResult, pair_job_from_message, pair_result_message
 
         job = pair_job_from_message(msg)
         self.jobs.append((job.source_view, job.target_view))
