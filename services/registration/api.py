@@ -179,17 +179,24 @@ def dynamic_config(d: dict) -> DynamicConfig:
     return cfg
 
 
-def session_dynamic_config(session_data: dict, config: DynamicConfig | None = None) -> DynamicConfig:
-    """The dynamic stage's config for a recorded session (``session.json``): a fixed camera's views differ by
-    a turn only (``pair.turn_only``); the session's stated turn accuracy bounds a view's correction."""
-    from services.registration.dynamic.model import DynamicConfig
+def with_turn_accuracy(config: dict, turn_accuracy_deg: float | None) -> dict:
+    """A dynamic request's config map with the arm's stated turn accuracy (1 sigma, degrees) as the window
+    beyond which a view correction is implausible, unless the map sets that window itself: what
+    ``session_dynamic_config`` does for a recorded session, so a live scan and ``reconstruct`` of it agree."""
+    if not (isinstance(turn_accuracy_deg, (int, float)) and turn_accuracy_deg > 0):
+        return dict(config)
+    outliers = dict(config.get("outliers") or {})
+    outliers.setdefault("turn_sigma_deg", float(turn_accuracy_deg))
+    return {**config, "outliers": outliers}
 
-    cfg = config or DynamicConfig()
+
+def session_dynamic_config(session_data: dict, config: DynamicConfig | None = None) -> DynamicConfig:
+    """The dynamic stage's config for a recorded session (``session.json``): without ``config``, the
+    default with the session's stated turn accuracy (as ``with_turn_accuracy`` gives a live scan's request);
+    and a fixed camera's views differ by a turn only (``pair.turn_only``)."""
+    cfg = config or dynamic_config(with_turn_accuracy({}, session_data.get("turn_accuracy_deg")))
     if cfg.pair.turn_only is None:  # a fixed camera sees one table: every view differs by a turn (pair.py)
         cfg = replace(cfg, pair=replace(cfg.pair, turn_only=session_data.get("camera") == "fixed"))
-    sigma = session_data.get("turn_accuracy_deg")
-    if config is None and isinstance(sigma, (int, float)) and sigma > 0:
-        cfg = replace(cfg, outliers=replace(cfg.outliers, turn_sigma_deg=float(sigma)))
     return cfg
 
 
@@ -239,4 +246,4 @@ def dynamic_configurations(config: dict) -> list[str]:
 
 __all__ = sorted({*_EXPORTS, *_ALIASES, "EdgeJob", "dynamic_config", "dynamic_configurations", "edge_jobs",
                   "edge_views_needed", "model_cloud", "register_scans", "session_dynamic_config",
-                  "static_config", "view_from_result", "view_result", "views_from_results"})
+                  "static_config", "view_from_result", "view_result", "views_from_results", "with_turn_accuracy"})
