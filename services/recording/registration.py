@@ -118,12 +118,12 @@ def replay_registration(source: str | Path, out_dir: str | Path, *, static_profi
     """
     from services.registration.api import (
         build_model,
-        dynamic_config,
         model_cloud,
         register_scans,
         view_result,
         views_from_results,
     )
+    from services.registration.api import dynamic_config as make_dynamic_config  # the parameter has its name
     from services.session_store import SessionStore
 
     say = progress or (lambda _m: None)
@@ -155,7 +155,7 @@ def replay_registration(source: str | Path, out_dir: str | Path, *, static_profi
     if len(order) >= 2:
         t = time.perf_counter()
         views = [store.load_view(k) for k in order]
-        model = build_model(views_from_results(views, turns), dynamic_config(dyn))
+        model = build_model(views_from_results(views, turns), make_dynamic_config(dyn))
         cloud = model_cloud(model)
         report["model"] = str(store.save_model(cloud))
         report["model_figures"] = model.to_json()
