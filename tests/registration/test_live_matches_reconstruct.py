@@ -61,6 +61,7 @@ def live_model(group, session, out) -> tuple[ModelResult, np.ndarray]:  # noqa: 
 
 
 @pytest.mark.slow  # two static stages and two dynamic stages of 6 views: about a minute idle, more when loaded
+@pytest.mark.timeout(2400)  # measured over 10 min on a shared 2-core machine at load 20
 def test_a_live_scan_and_reconstruct_of_its_session_build_the_same_model(service_group, recorded, tmp_path):
     session, truth = recorded
     service_group.launch([ProcessSpec("services.registration", [], service="registration")], timeout=180)
