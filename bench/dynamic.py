@@ -138,8 +138,7 @@ def log_row(where: str, row: str, figures: dict) -> None:
 
 def _static_view(args: tuple) -> object:
     """One view through the static stage, as a dynamic view (module level: runs in a pool's worker)."""
-    from services.registration.dynamic.views import view_from_static
-    from services.registration.static.pipeline import register_view
+    from services.registration.api import register_view, view_from_static
 
     fr, static, k, T_view0_view = args
     return view_from_static(register_view(fr, static), float(fr[0].meta.get("commanded_turn_deg", 30.0 * k)), k,
@@ -191,7 +190,7 @@ def paper_static(frames: list, cache_dir=None) -> tuple[list, dict]:  # noqa: AN
     import pickle
     from pathlib import Path
 
-    from services.registration.static import StaticConfig
+    from services.registration.api import StaticConfig
 
     path = Path(cache_dir) / f"paper_static_{_fingerprint(frames)}.pkl" if cache_dir else None
     if path is not None and path.is_file():
@@ -210,8 +209,7 @@ def paper_rows(frames: list, gt: np.ndarray, rows: tuple[str, ...], cache_dir=No
                where: str = "") -> dict:
     """The paper-faithful rows of ``rows`` on these frames: paper static profile, then paper pairs (one pair
     per worker process; what each computes is unchanged)."""
-    from services.registration.dynamic.model import DynamicConfig, build_model, process_pool_map
-    from services.registration.static import StaticRegistrationError
+    from services.registration.api import DynamicConfig, StaticRegistrationError, build_model, process_pool_map
 
     wanted = [r for r in rows if r in PAPER_ROWS]
     if not wanted:
@@ -234,8 +232,7 @@ def paper_rows(frames: list, gt: np.ndarray, rows: tuple[str, ...], cache_dir=No
 def fast_row(views: list, gt: np.ndarray, row: str) -> dict:
     """One fast-path or oracle row (``ROW_PATHS``) on the default static profile's views."""
     from bench.synthetic import oracle_poses
-    from services.registration.dynamic.combine import CombineConfig
-    from services.registration.dynamic.model import DynamicConfig, build_model, fuse
+    from services.registration.api import CombineConfig, DynamicConfig, build_model, fuse
 
     t, c = time.perf_counter(), _cpu()
     extra: dict = {}
@@ -314,7 +311,7 @@ def _reconstruct_seconds(frames: list, workers: int, cpu: dict | None = None) ->
     import tempfile
     from pathlib import Path
 
-    from services.registration.reconstruct import reconstruct
+    from services.registration.api import reconstruct
     from services.sim.scenario import write_session
 
     with tempfile.TemporaryDirectory(prefix="bench-reconstruct-") as tmp:
@@ -341,7 +338,7 @@ def _gt(obj: str, T0: np.ndarray) -> np.ndarray:
 
 def _chamfer(xyz: np.ndarray, gt: np.ndarray) -> float:
     """Chamfer after aligning the model to the ground truth as the paper does (ICP from identity)."""
-    from services.registration.evaluation import evaluate_model
+    from services.registration.api import evaluate_model
 
     return float(evaluate_model(xyz, gt, align=True, init_T=np.eye(4))["chamfer_mm"])
 

@@ -31,7 +31,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from common.geometry import invert, make_transform, rotation_about_line, transform_error, transform_points
-from services.registration.dynamic.global_registration import global_register, refine_icp
+from services.registration.api import global_register, refine_icp
 
 METHODS = ("4pcs", "fpfh_ransac", "fgr")
 SUCCESS_DEG = 5.0

@@ -161,7 +161,7 @@ def _time(points, normals, cfg, repeats) -> tuple[list[float], list[float], Any]
 def _turn_survey(names: list[str], seed: int) -> dict[str, Any]:
     """Grasps found at every 30° turn of each object, as the acquisition sees it (see the module doc)."""
     from services.grasp.service import GraspService
-    from services.registration.static import register_view
+    from services.registration.api import register_view
     from services.sim.scenario import simulated_views
     from services.sim.world import default_object_pose
 

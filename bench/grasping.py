@@ -85,7 +85,7 @@ def scan_and_plan(world, method: str, seq: int):  # noqa: ANN001, ANN201
     """3 frames around the object as it lies, the static registration's isolated object, the plan."""
     from services.grasp import plan_grasps
     from services.grasp.service import GraspService
-    from services.registration.static.pipeline import register_view
+    from services.registration.api import register_view
     from services.sim.scenario import ScanPoses
 
     T = world.true_object_pose()

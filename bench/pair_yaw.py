@@ -89,7 +89,7 @@ def true_view_pose(B0: np.ndarray, Bk: np.ndarray, C_true: np.ndarray, C_believe
 
 def true_edges(prep: Any, oracle: list[np.ndarray]) -> dict[tuple[int, int], np.ndarray]:
     """True transform of every neighbour edge (source -> target) in the stacked frame."""
-    from services.registration.dynamic.preprocess import neighbour_edges
+    from services.registration.api import neighbour_edges
 
     S = {pv.index: pv.T_stack_view for pv in prep.views}
     out = {}
@@ -101,7 +101,7 @@ def true_edges(prep: Any, oracle: list[np.ndarray]) -> dict[tuple[int, int], np.
 def edge_error(T: np.ndarray, T_true: np.ndarray, axis: np.ndarray, center: np.ndarray) -> dict[str, float]:
     """Signed yaw error (deg) about ``axis``, tilt error (deg) and centre displacement error (mm)."""
     from common.geometry import yaw_deg_about
-    from services.registration.dynamic.pair import tilt_deg
+    from services.registration.api import tilt_deg
 
     dR = np.asarray(T)[:3, :3] @ np.asarray(T_true)[:3, :3].T
     c = np.asarray(center, dtype=float)
@@ -131,11 +131,16 @@ def measure_synthetic(name: str, seed: int = 0, configuration: str = "no_region"
 def measure_views(views: list, poses: list[np.ndarray], configuration: str = "no_region",
                   pair: Any = None) -> dict[str, Any]:
     """Every edge of ``configuration``: its error against the true view poses, path, fitness, CPU s."""
-    from services.registration.dynamic.combine import loop_closure_error
-    from services.registration.dynamic.configurations import CONFIGURATIONS
-    from services.registration.dynamic.model import DynamicConfig, chain_to_first, make_pair_jobs
-    from services.registration.dynamic.pair import register_pair
-    from services.registration.dynamic.preprocess import attach_regions, preprocess
+    from services.registration.api import (
+        CONFIGURATIONS,
+        DynamicConfig,
+        attach_regions,
+        chain_to_first,
+        loop_closure_error,
+        make_pair_jobs,
+        preprocess,
+        register_pair,
+    )
 
     cfg = DynamicConfig()
     prep = preprocess(views, cfg.preprocess)
@@ -182,8 +187,7 @@ def main() -> None:
         del args[i:i + 2]
     pair = None
     if "--no-yaw-refine" in args:
-        from services.registration.dynamic.pair import PairConfig
-        from services.registration.dynamic.yaw_refine import YawRefineConfig
+        from services.registration.api import PairConfig, YawRefineConfig
 
         args.remove("--no-yaw-refine")
         pair = PairConfig(yaw_refine=YawRefineConfig(enabled=False))

@@ -34,9 +34,7 @@ def castard(quick: bool, out_root: Path = OUT) -> dict[str, Any]:
 
     from services.importer.session import ImportConfig, import_sequence
     from services.importer.sources import parse_intrinsics
-    from services.registration.dynamic.model import DynamicConfig
-    from services.registration.evaluation import view_agreement
-    from services.registration.reconstruct import reconstruct
+    from services.registration.api import DynamicConfig, reconstruct, view_agreement
 
     seq = DATA / "real_sequences" / "castard_d415"
     session, model_dir = out_root / "castard_session", out_root / "castard_model"
@@ -116,7 +114,7 @@ def single_frames() -> dict[str, Any]:
 
     from common.errors import ObjscanError
     from common.messages import Intrinsics, RGBDFrame
-    from services.registration.static import StaticConfig, register_view
+    from services.registration.api import StaticConfig, register_view
 
     d = DATA / "rgbd" / "tabletop_uoc"
     p = json.loads((d / "camera_params.json").read_text())

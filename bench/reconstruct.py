@@ -110,9 +110,7 @@ def oracle_chamfer(session: Path, out: Path, name: str, peer_model: Path | None 
     from bench.synthetic import oracle_poses
     from common.geometry import invert
     from common.messages import Plane
-    from services.registration.cloud import read_ply
-    from services.registration.dynamic.model import fuse
-    from services.registration.dynamic.views import DynamicView
+    from services.registration.api import DynamicView, fuse, read_ply
 
     T0 = _truth(session, 0)
     gt = _gt(name, T0)

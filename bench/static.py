@@ -23,8 +23,13 @@ from typing import Any
 
 import numpy as np
 
-from services.registration.static import StaticConfig, StaticRegistrationError, register_view
-from services.registration.static.pose_errors import prior_pose_errors, relative_pose_errors
+from services.registration.api import (
+    StaticConfig,
+    StaticRegistrationError,
+    prior_pose_errors,
+    register_view,
+    relative_pose_errors,
+)
 
 TARGET_S_PER_VIEW = 1.0
 TARGET_FALLBACK_FRACTION = 0.10  # scans that need the global path

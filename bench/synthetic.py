@@ -21,7 +21,7 @@ import open3d as o3d
 
 from common.geometry import invert, look_at, make_transform, rotation_about_axis
 from common.messages import Plane, d435_intrinsics
-from services.registration.dynamic.views import DynamicRegistrationError, DynamicView
+from services.registration.api import DynamicRegistrationError, DynamicView
 from services.sim.catalogue import SimObject, load_object
 from services.sim.errors import SimError
 from services.sim.profiles import get_profile

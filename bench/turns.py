@@ -26,9 +26,7 @@ def _pairs(obj: str, turns: tuple[float, ...], scans: int = SCANS):
     paired with view 0, so the pairs are turned by about ``turns`` (the truth from the twin). One sequence
     instead of one per turn, and ``scans`` scans per view, keep the full run to minutes on a loaded
     machine (it did not finish with 2 views x 3 scans per pair)."""
-    from services.registration.dynamic.preprocess import fit_palette, prerotation
-    from services.registration.dynamic.views import view_from_static
-    from services.registration.static import register_view
+    from services.registration.api import fit_palette, prerotation, register_view, view_from_static
     from services.sim.scenario import simulated_views
 
     step = turns[0]
@@ -51,8 +49,7 @@ def _pairs(obj: str, turns: tuple[float, ...], scans: int = SCANS):
 
 
 def _job(v0, v1, axis, prior, palette):
-    from services.registration.dynamic.pair import PairConfig, PairJob
-    from services.registration.dynamic.preprocess import Cloud, quantize
+    from services.registration.api import Cloud, PairConfig, PairJob, quantize
 
     def reduced(v, T):
         return Cloud(np.asarray(v.xyz, np.float32), quantize(np.asarray(v.rgb), palette),
@@ -63,7 +60,8 @@ def _job(v0, v1, axis, prior, palette):
 
 
 def _six_dof(job, scorer):
-    from services.registration.dynamic.pair import _score_key, fast_local, global_align
+    from services.registration.api import fast_local, global_align
+    from services.registration.api import pair_score_key as _score_key
 
     cfg = job.config
     rng = np.random.default_rng(cfg.seed)
@@ -79,7 +77,9 @@ def _six_dof(job, scorer):
 
 
 def run(quick: bool = False) -> dict[str, Any]:
-    from services.registration.dynamic.pair import _evaluation_clouds, _score_key, _turn_stage
+    from services.registration.api import pair_evaluation_clouds as _evaluation_clouds
+    from services.registration.api import pair_score_key as _score_key
+    from services.registration.api import pair_turn_stage as _turn_stage
     from services.sim.catalogue import hope_names
 
     objects = ["milk", "orange_juice"] if quick else hope_names()

@@ -42,7 +42,7 @@ from common.session_folder import (
     write_scan,
     write_session,
 )
-from services.registration.cloud import read_ply, write_ply
+from services.registration.api import read_ply, write_ply
 
 JOURNAL = "journal.json"
 LOCK = ".session.lock"

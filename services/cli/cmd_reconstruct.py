@@ -57,8 +57,7 @@ def run(args) -> int:  # noqa: ANN001
     """Exit 0 when a model was built (accepted or not: an unaccepted one is flagged on stderr and in the
     JSON), 1 when no model was built (the dynamic stage's error is printed; no accuracy figures)."""
     session, out = require_path(args.session, "session folder"), Path(args.out)  # before the heavy imports
-    from services.registration.reconstruct import reconstruct
-    from services.registration.static.config import StaticConfig
+    from services.registration.api import StaticConfig, reconstruct
 
     if args.gt:  # an unknown ground truth is said now, not after minutes of registration
         from services.sim.catalogue import resolve_object
@@ -78,7 +77,7 @@ def run(args) -> int:  # noqa: ANN001
     if args.gt and model is not None:
         import open3d as o3d
 
-        from services.registration.evaluation import evaluate_model
+        from services.registration.api import evaluate_model
 
         xyz = np.asarray(o3d.io.read_point_cloud(str(model)).points)
         gt, posed = ground_truth_points(args.gt, session)

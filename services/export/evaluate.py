@@ -17,7 +17,7 @@ import open3d as o3d
 
 from common.errors import ObjscanError
 from services.export.inputs import SessionModel
-from services.registration.evaluation import evaluate_model, sample_mesh
+from services.registration.api import evaluate_model, sample_mesh
 
 #: True surface samples, as many as the acquisition's own evaluation draws.
 GT_POINTS = 60000

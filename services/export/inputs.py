@@ -20,7 +20,7 @@ from common.errors import ObjscanError
 from common.messages import RGBDFrame
 from common.session_folder import read_scan, read_session, view_dir
 from services.export.errors import ExportInputError
-from services.registration.cloud import read_ply
+from services.registration.api import read_ply
 
 
 @dataclass

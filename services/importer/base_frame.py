@@ -17,11 +17,7 @@ import numpy as np
 from common.geometry import invert, make_transform
 from common.messages import RGBDFrame
 from services.importer.errors import ImportError_
-from services.registration.cloud import frame_points
-from services.registration.static.config import StaticConfig
-from services.registration.static.errors import NoTableError
-from services.registration.static.scans import centre_depth
-from services.registration.static.table import segment_table
+from services.registration.api import NoTableError, StaticConfig, centre_depth, frame_points, segment_table
 
 #: optical frame (x right, y down, z forward): an upright camera's "up" is -y
 IMAGE_UP = (0.0, -1.0, 0.0)

@@ -35,8 +35,7 @@ import open3d as o3d
 
 from common.geometry import invert, yaw_deg_about
 from common.messages import Intrinsics
-from services.registration.dynamic.turn4dof import TurnResult, project_to_turn
-from services.registration.dynamic.views import DynamicView
+from services.registration.api import DynamicView, TurnResult, project_to_turn
 
 reg = o3d.pipelines.registration
 

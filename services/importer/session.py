@@ -23,9 +23,7 @@ from services.importer.errors import ImportError_, OutNotEmpty
 from services.importer.selfcal import FocalSearchConfig, calibrate_focal, scale_intrinsics
 from services.importer.sources import MAX_FRAMES, read_frames
 from services.importer.turns import DIRECTIONS, pair_searches, plan_turns
-from services.registration.dynamic.turn4dof import TurnSearchConfig
-from services.registration.dynamic.views import view_from_static
-from services.registration.static import StaticConfig, register_view
+from services.registration.api import StaticConfig, TurnSearchConfig, register_view, view_from_static
 
 
 @dataclass(frozen=True)

@@ -21,9 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from services.registration.dynamic.preprocess import Cloud, prerotation
-from services.registration.dynamic.turn4dof import TurnResult, TurnSearchConfig, search_turn
-from services.registration.dynamic.views import DynamicView
+from services.registration.api import Cloud, DynamicView, TurnResult, TurnSearchConfig, prerotation, search_turn
 
 DIRECTIONS = ("ccw", "cw", "unknown")
 

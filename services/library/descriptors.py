@@ -17,8 +17,7 @@ import numpy as np
 import open3d as o3d
 
 from services.library.errors import BadModelInput
-from services.registration.dynamic.fourpcs_common import PointCloudInputError
-from services.registration.dynamic.good import good_descriptor, good_distance
+from services.registration.api import PointCloudInputError, good_descriptor, good_distance
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,7 @@ from scipy.spatial import cKDTree
 from common.messages import PointCloud
 from services.library.descriptors import DescriptorConfig, check_xyz, describe, view_distance
 from services.library.errors import BadModelInput
-from services.registration.blocks import (
+from services.registration.api import (
     ColorICPConfig,
     FeatureMatchConfig,
     colored_icp,

@@ -70,7 +70,7 @@ from services.library.descriptors import DescriptorConfig, check_xyz, model_desc
 from services.library.errors import BadModelInput, LibraryError, ModelNotFound, UnacceptedModel
 from services.library.matching import find as find_matches
 from services.library.metadata import ModelMetadata, slug
-from services.registration.cloud import CloudError, to_o3d
+from services.registration.api import CloudError, to_o3d
 
 log = logging.getLogger("objscan.library")
 

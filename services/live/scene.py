@@ -103,7 +103,7 @@ class _Placed:
 
 def preview(views: dict[int, ViewResult], turns_deg: list[float]) -> tuple[list[int], np.ndarray, np.ndarray]:
     """Views with a known turn, stacked in view 0's frame by undoing their turns (subsampled per view)."""
-    from services.registration.dynamic.preprocess import prerotation
+    from services.registration.api import prerotation
 
     ks = sorted(k for k in views if 0 <= k < len(turns_deg))
     if not ks or 0 not in views:

@@ -39,6 +39,15 @@ from pathlib import Path
 from typing import Any
 
 from common.log import event
+from services.registration.api import (
+    EdgeJob,
+    dynamic_configurations,
+    edge_jobs,
+    edge_views_needed,
+    pair_job_message,
+    pair_record,
+    pair_result_from_message,
+)
 from services.session_store import SessionStore
 
 log = logging.getLogger("objscan.orchestrator")
@@ -85,10 +94,7 @@ class IncrementalModel:
     @property
     def names(self) -> list[str]:
         if self._names is None:
-            from services.registration.dynamic.model import configuration_names
-            from services.registration.dynamic_face import dynamic_config
-
-            self._names = configuration_names(dynamic_config(self.config))
+            self._names = dynamic_configurations(self.config)
         return self._names
 
     # ------------------------------------------------------------------------------------------ scheduling
@@ -160,26 +166,19 @@ class IncrementalModel:
     def _path(self, source: int, fingerprint: str) -> Path:
         return self.folder / f"edge_{source - 1:02d}_{fingerprint[:16]}.json"
 
-    def _jobs(self, source: int, turns_deg: list[float], names: list[str]) -> list[tuple[str, Any, str]]:
-        """Build the jobs exactly as the dynamic stage will (same conversion, same config): CPU, in a thread.
-        [(configuration, PairJob, fingerprint)], empty when they cannot be known yet."""
-        from services.registration.dynamic.model import early_pair_jobs
-        from services.registration.dynamic.pair import job_fingerprint
-        from services.registration.dynamic_face import dynamic_config, dynamic_view
-
-        cfg = dynamic_config(self.config)
-        needed = sorted({0, *range(cfg.preprocess.palette_views), source - 1, source})
-        views = {i: dynamic_view(self.store.load_view(i), turns_deg[i], i) for i in needed}
-        return [(name, job, job_fingerprint(job)) for name, job in early_pair_jobs(views, source, cfg, names)]
+    def _jobs(self, source: int, turns_deg: list[float], names: list[str]) -> list[EdgeJob]:
+        """The edge's jobs as the dynamic stage will build them (registration's ``edge_jobs``) from the views
+        stored so far: CPU, in a thread. Empty when they cannot be known yet."""
+        views = {i: self.store.load_view(i) for i in edge_views_needed(self.config, source)}
+        return edge_jobs(views, turns_deg, self.config, source, names)
 
     async def _edge(self, source: int, generation: int, turns_deg: list[float]) -> None:
         """The first configuration's job of edge ``source``, in the foreground; then the edge's other
         configurations go to the speculative queue."""
         self._foreground += 1
         try:
-            built = await asyncio.to_thread(self._jobs, source, turns_deg, self.names[:1])
-            for name, job, fingerprint in built:
-                await self._send(source, name, job, fingerprint, background=False)
+            for edge in await asyncio.to_thread(self._jobs, source, turns_deg, self.names[:1]):
+                await self._send(source, edge, background=False)
         except asyncio.CancelledError:
             raise
         except Exception as exc:  # noqa: BLE001 - left to the end: the model is still built, the cause logged
@@ -216,29 +215,27 @@ class IncrementalModel:
             if generation != self._generation.get(source):
                 continue  # the view was re-scanned since: its new edge is queued anew
             try:
-                built = await asyncio.to_thread(self._jobs, source, turns_deg, self.names[1:])
-                for name, job, fingerprint in built:
+                for edge in await asyncio.to_thread(self._jobs, source, turns_deg, self.names[1:]):
                     if not await self._quiet(want_queue=False):
                         return
-                    await self._send(source, name, job, fingerprint, background=True)
+                    await self._send(source, edge, background=True)
             except asyncio.CancelledError:
                 raise
             except Exception as exc:  # noqa: BLE001 - the dynamic stage computes it if it needs it
                 self.decide("speculative pair job failed; the dynamic stage will compute it if needed",
                             source=source, error=str(exc)[:200])
 
-    async def _send(self, source: int, name: str, job: Any, fingerprint: str, *, background: bool) -> None:
+    async def _send(self, source: int, edge: EdgeJob, *, background: bool) -> None:
         """One job to the registration workers, its result stored; a job stored already is not sent again.
         ``background``: speculative, run at the workers' lowest CPU priority."""
-        from services.registration.pair_wire import pair_job_message, pair_record, pair_result_from_message
-
-        path = self._path(source, fingerprint)
+        path = self._path(source, edge.fingerprint)
         if path.is_file():  # finished before a restart: never sent twice
             return
         self.sent += 1
-        self.sent_by_configuration[name] = self.sent_by_configuration.get(name, 0) + 1
-        reply = await self.cell.register_pair(pair_job_message(job, background))
+        self.sent_by_configuration[edge.configuration] = self.sent_by_configuration.get(edge.configuration, 0) + 1
+        reply = await self.cell.register_pair(pair_job_message(edge.job, background))
         result = pair_result_from_message(reply)
-        self.store.save_json(f"{PAIRS_DIR}/{path.name}", pair_record(fingerprint, result))
-        self.decide("pair registered during the acquisition", edge=job.index, source=source, configuration=name,
-                    fitness=round(result.fitness, 3), seconds=round(result.seconds, 2))
+        self.store.save_json(f"{PAIRS_DIR}/{path.name}", pair_record(edge.fingerprint, result))
+        self.decide("pair registered during the acquisition", edge=edge.job.index, source=source,
+                    configuration=edge.configuration, fitness=round(result.fitness, 3),
+                    seconds=round(result.seconds, 2))

@@ -67,6 +67,7 @@ from services.orchestrator.regrasp import (
     yaw_tied,
 )
 from services.orchestrator.topple import topple_reason
+from services.registration.api import with_turn_accuracy
 from services.session_store import SessionStore
 
 log = logging.getLogger("objscan.orchestrator")
@@ -774,7 +775,8 @@ class Acquisition:
         turns = [float(t) for t in self.j.turns_deg[:n]]
         self.incremental.catch_up(n - 1, turns)  # after a resume: any edge not started yet
         reuse = await self.incremental.finished()
-        result = await self.cell.build_model(views, turns, {**self.incremental.config, "reuse_pairs": reuse})
+        config = with_turn_accuracy(self.incremental.config, self.config.turn_accuracy_deg)  # as reconstruct does
+        result = await self.cell.build_model(views, turns, {**config, "reuse_pairs": reuse})
         path = self.store.save_model(result.cloud)
         last_scan = scan_dir(self.store.path, n - 1, SCANS_PER_VIEW - 1) / "meta.json"
         if last_scan.is_file():  # the model's lateness: from the last view's last scan saved to the model saved
@@ -812,7 +814,7 @@ class Acquisition:
 
     async def _evaluate(self, model_xyz: np.ndarray) -> dict[str, Any]:
         """Chamfer/F-score against the twin's ground-truth surface, posed as the object stood in view 0."""
-        from services.registration.evaluation import evaluate_model
+        from services.registration.api import evaluate_model
 
         first = self.store.load_scan(0, 0)
         T0 = first.meta.get("T_base_object_true")

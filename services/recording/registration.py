@@ -19,13 +19,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from common import keys
 from common.api import DynamicRequest, ModelResult, StaticRequest, ViewResult
 from common.atomic import atomic_write_bytes
 from common.messages import PointCloud, RGBDFrame
-from common.pose_accuracy import PoseAccuracy, session_pose_accuracy
+from common.pose_accuracy import session_pose_accuracy
 from common.session_folder import read_scan, read_session, write_scan
 from services.recording.compare import compare_models
 from services.recording.errors import RecordingError
@@ -84,7 +82,7 @@ def inputs_from_recording(source: str | Path) -> RegistrationInputs:
 
 
 def inputs_from_folder(session_dir: str | Path) -> RegistrationInputs:
-    from services.registration.cloud import read_ply
+    from services.registration.api import read_ply
 
     info = read_session(Path(session_dir))
     cfg = info.data.get("config", {}) if isinstance(info.data.get("config"), dict) else {}
@@ -118,12 +116,14 @@ def replay_registration(source: str | Path, out_dir: str | Path, *, static_profi
     Returns (and writes as ``out_dir/replay.json``) the timings, the model path and, when the recording
     holds a model, the comparison with it (``compare_models``).
     """
-    from services.registration.dynamic.model import build_model
-    from services.registration.dynamic_face import dynamic_config as make_dynamic_config
-    from services.registration.dynamic_face import views_from_request
-    from services.registration.service import view_result_message
-    from services.registration.static.config import StaticConfig
-    from services.registration.static.pipeline import register_view
+    from services.registration.api import (
+        build_model,
+        model_cloud,
+        register_scans,
+        view_result,
+        views_from_results,
+    )
+    from services.registration.api import dynamic_config as make_dynamic_config  # the parameter has its name
     from services.session_store import SessionStore
 
     say = progress or (lambda _m: None)
@@ -142,9 +142,8 @@ def replay_registration(source: str | Path, out_dir: str | Path, *, static_profi
         frames = inputs.views[k]
         for j, frame in enumerate(frames):
             write_scan(out, k, j, frame)
-        accuracy = PoseAccuracy.from_dict(inputs.pose_accuracy) if inputs.pose_accuracy else None
-        result = register_view(frames, StaticConfig.for_profile(profile).with_accuracy(accuracy))
-        store.save_view(view_result_message(k, result))
+        result = register_scans(frames, profile, inputs.pose_accuracy)
+        store.save_view(view_result(k, result))
         timings[f"static_view_{k:02d}"] = round(time.perf_counter() - t, 3)
         say(f"view {k}: {len(result.object_cloud)} object points in {timings[f'static_view_{k:02d}']:.1f} s")
     turns = [float(inputs.turns_deg.get(k, 0.0)) for k in order]
@@ -156,16 +155,14 @@ def replay_registration(source: str | Path, out_dir: str | Path, *, static_profi
     if len(order) >= 2:
         t = time.perf_counter()
         views = [store.load_view(k) for k in order]
-        request = DynamicRequest(views=views, turns_deg=turns, config=dyn)
-        model = build_model(views_from_request(request), make_dynamic_config(dyn))
-        cloud = PointCloud(xyz=np.asarray(model.xyz, np.float32), rgb=np.asarray(model.rgb, np.uint8),
-                           normals=np.asarray(model.normals, np.float32))
+        model = build_model(views_from_results(views, turns), make_dynamic_config(dyn))
+        cloud = model_cloud(model)
         report["model"] = str(store.save_model(cloud))
         report["model_figures"] = model.to_json()
         timings["dynamic"] = round(time.perf_counter() - t, 3)
         say(f"model: {len(cloud)} points in {timings['dynamic']:.1f} s")
         if inputs.recorded_model is not None:
-            from services.registration.cloud import read_ply
+            from services.registration.api import read_ply
 
             replayed = read_ply(out / "model.ply")  # compare what is on disk, as the recorded model.ply
             recorded = _as_saved(inputs.recorded_model, out)
@@ -178,7 +175,7 @@ def replay_registration(source: str | Path, out_dir: str | Path, *, static_profi
 
 def _as_saved(cloud: PointCloud, out: Path) -> PointCloud:
     """The recorded model as the orchestrator saved it (its PLY round trip), for a like-for-like comparison."""
-    from services.registration.cloud import read_ply, write_ply
+    from services.registration.api import read_ply, write_ply
 
     tmp = out / ".recorded_model.ply"
     write_ply(tmp, cloud)

@@ -106,7 +106,7 @@ def replay_session(source: str | Path, out_dir: str | Path, *, atol: float = 1e-
     recorded = _recorded_model(rec)
     model_path = out / "model.ply"
     if recorded is not None and model_path.is_file():
-        from services.registration.cloud import read_ply, write_ply
+        from services.registration.api import read_ply, write_ply
 
         tmp = out / ".recorded_model.ply"  # the recorded model as the orchestrator saved it (PLY round trip)
         write_ply(tmp, recorded)

@@ -15,28 +15,29 @@ import queue
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import replace
 from typing import Any, Protocol
 
-import numpy as np
 import zenoh
 
 from common import keys
-from common.api import DynamicRequest, ModelResult, ViewResult
+from common.api import DynamicRequest, ModelResult
 from common.codec import Message, decode
 from common.errors import InvalidRequest, RemoteError, WireError
 from common.log import event
-from common.messages import PointCloud
-from services.registration.dynamic.model import DynamicConfig, build_model
-from services.registration.dynamic.pair import PairConfig, PairJob, PairResult, register_pair
-from services.registration.dynamic.views import DynamicView
-from services.registration.pair_wire import (
+from services.registration.api import (
+    PairJob,
+    PairResult,
     PairResultMessage,
+    build_model,
+    dynamic_config,
+    model_cloud,
     pair_job_from_message,
     pair_job_message,
     pair_result_from_message,
     pair_result_message,
+    register_pair,
     reuse_records,
+    views_from_results,
 )
 
 
@@ -179,45 +180,6 @@ def distributed_map(session: zenoh.Session, stats: dict, own_instance: str | Non
     return map_pairs
 
 
-def dynamic_view(v: ViewResult, turn_deg: float, index: int) -> DynamicView:
-    """The dynamic stage's view of a registered view as it travels (and as the orchestrator stores it)."""
-    c = v.cloud
-    return DynamicView(xyz=np.asarray(c.xyz, np.float32),
-                       rgb=np.asarray(c.rgb if c.rgb is not None else np.zeros_like(c.xyz, np.uint8)),
-                       normals=None if c.normals is None else np.asarray(c.normals, np.float32),
-                       table=v.table, center=np.asarray(v.center, float), commanded_turn_deg=float(turn_deg),
-                       index=index)
-
-
-def views_from_request(msg: DynamicRequest) -> list[DynamicView]:
-    return [dynamic_view(v, turn, k) for k, (v, turn) in enumerate(zip(msg.views, msg.turns_deg, strict=True))]
-
-
-def dynamic_config(d: dict) -> DynamicConfig:
-    """A DynamicConfig from a request's map: ``configuration``, ``paper`` (bool), ``model_voxel``, ``pair``,
-    ``accept`` (``AcceptCriteria`` fields), ``preprocess`` (e.g. ``{"palette_views": 2}``, as the incremental
-    model sets it)."""
-    if d.get("paper"):
-        cfg = DynamicConfig.paper(d.get("configuration", "no_region"))
-    else:
-        cfg = DynamicConfig(configuration=d.get("configuration", "auto"))
-    if "model_voxel" in d:
-        cfg = replace(cfg, model_voxel=float(d["model_voxel"]))
-    if isinstance(d.get("pair"), dict):
-        cfg = replace(cfg, pair=replace(cfg.pair, **d["pair"]))
-    if isinstance(d.get("accept"), dict):  # when the staged choice may stop (tests force the fallback path)
-        try:
-            cfg = replace(cfg, accept=replace(cfg.accept, **d["accept"]))
-        except TypeError as exc:
-            raise InvalidRequest(f"bad accept criteria: {exc}", detail={"accept": d["accept"]}) from exc
-    if isinstance(d.get("preprocess"), dict):
-        try:
-            cfg = replace(cfg, preprocess=replace(cfg.preprocess, **d["preprocess"]))
-        except TypeError as exc:
-            raise InvalidRequest(f"bad preprocess config: {exc}", detail={"preprocess": d["preprocess"]}) from exc
-    return cfg
-
-
 async def register_pair_distributed(service: ServiceContext, msg: Message | None) -> PairResultMessage:
     """One pair job (``registration/pair``), run by a live worker; a worker that dies has it re-run by another.
 
@@ -233,17 +195,15 @@ async def register_pair_distributed(service: ServiceContext, msg: Message | None
 async def build_model_distributed(service: ServiceContext, msg: Message | None) -> ModelResult:
     if not isinstance(msg, DynamicRequest):
         raise InvalidRequest("expected a DynamicRequest", detail={"got": type(msg).__name__})
-    views = views_from_request(msg)
+    views = views_from_results(msg.views, msg.turns_deg)
     config = dynamic_config(msg.config)
     reuse = reuse_records(msg.config.get("reuse_pairs", []))
     stats: dict = {}
     map_pairs = distributed_map(service.session, stats, service.instance, service.pair_slots)
     result = await service.run_cpu(build_model, views, config, map_pairs, reuse=reuse)
-    cloud = PointCloud(xyz=np.asarray(result.xyz, np.float32), rgb=np.asarray(result.rgb, np.uint8),
-                       normals=np.asarray(result.normals, np.float32))
     figures = result.to_json()
     figures["workers"] = stats
-    return ModelResult(cloud=cloud, figures=figures)
+    return ModelResult(cloud=model_cloud(result), figures=figures)
 
 
-__all__ = ["PairConfig", "build_model_distributed", "distributed_map", "register_pair_distributed"]
+__all__ = ["build_model_distributed", "distributed_map", "register_pair_distributed"]

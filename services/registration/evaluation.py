@@ -27,7 +27,7 @@ import numpy as np
 import open3d as o3d
 from scipy.spatial import cKDTree
 
-from services.registration.cloud import o3d_seeded
+from services.registration.cloud import o3d_seeded, to_o3d
 from services.registration.dynamic.fourpcs_common import as_xyz, check_transform
 
 F_SCORE_THRESHOLDS_M = (0.002, 0.005)
@@ -128,7 +128,7 @@ def align_to_ground_truth(model_xyz: np.ndarray, gt_xyz: np.ndarray, *, init_T: 
     candidates = [] if init_T is None else [check_transform(init_T, "init_T")]
     candidates += _principal_axes_candidates(model, gt)
     m_small, g_small = _subsample(model, cfg.coarse_points, rng), _subsample(gt, 2 * cfg.coarse_points, rng)
-    src, tgt = _to_o3d(m_small), _to_o3d(g_small)
+    src, tgt = to_o3d(m_small), to_o3d(g_small)
     g_tree = cKDTree(g_small)
     best_T, best_score = np.eye(4), np.inf
     for T0 in candidates:
@@ -137,8 +137,8 @@ def align_to_ground_truth(model_xyz: np.ndarray, gt_xyz: np.ndarray, *, init_T: 
         score = g_tree.query(moved)[0].mean() + cKDTree(moved).query(g_small)[0].mean()
         if score < best_score:
             best_T, best_score = T, score
-    src = _to_o3d(_subsample(model, cfg.fine_points, rng))
-    tgt = _to_o3d(_subsample(gt, 2 * cfg.fine_points, rng))
+    src = to_o3d(_subsample(model, cfg.fine_points, rng))
+    tgt = to_o3d(_subsample(gt, 2 * cfg.fine_points, rng))
     return _icp_stages(src, tgt, best_T, cfg.fine_correspondence_m, cfg.iterations_per_stage)
 
 
@@ -189,10 +189,6 @@ def _mesh_distances(points: np.ndarray, mesh: o3d.geometry.TriangleMesh) -> np.n
     scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
     query = o3d.core.Tensor(points.astype(np.float32))
     return scene.compute_distance(query).numpy().astype(np.float64)
-
-
-def _to_o3d(points: np.ndarray) -> o3d.geometry.PointCloud:
-    return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(points, dtype=np.float64)))
 
 
 def view_agreement(posed_views: list[np.ndarray], *, near: float = 0.010, close: float = 0.003) -> list[dict]:

@@ -15,7 +15,6 @@ import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
 from contextlib import contextmanager
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -24,8 +23,9 @@ import numpy as np
 from common.errors import ObjscanError
 from common.pose_accuracy import session_pose_accuracy
 from common.session_folder import atomic_write_json, read_scan, read_session
+from services.registration.api import session_dynamic_config
 from services.registration.cloud import write_ply
-from services.registration.dynamic.model import DynamicConfig, MapPairs, build_model
+from services.registration.dynamic.model import MapPairs, build_model
 from services.registration.dynamic.pair import register_pair
 from services.registration.dynamic.views import view_from_static
 from services.registration.static import StaticConfig, StaticViewResult, register_view
@@ -234,12 +234,7 @@ def run_dynamic_stage(
     order = sorted(results)
     views = [view_from_static(results[k], session.commanded_turn_deg(k), index=k) for k in order]
     say = (lambda stage, info: progress({"stage": f"dynamic:{stage}", **info})) if progress else None
-    cfg = config or DynamicConfig()
-    if cfg.pair.turn_only is None:  # a fixed camera sees one table: every view differs by a turn (pair.py)
-        cfg = replace(cfg, pair=replace(cfg.pair, turn_only=session.data.get("camera") == "fixed"))
-    sigma = session.data.get("turn_accuracy_deg")
-    if config is None and isinstance(sigma, (int, float)) and sigma > 0:
-        cfg = replace(cfg, outliers=replace(cfg.outliers, turn_sigma_deg=float(sigma)))
+    cfg = session_dynamic_config(session.data, config)
     try:
         model = build_model(views, cfg, map_pairs=map_pairs, progress=say)
     except ObjscanError as exc:

@@ -13,30 +13,16 @@ Every instance is a worker; any one of them can coordinate a dynamic request. Th
 
 from __future__ import annotations
 
-import numpy as np
-
 from common import keys
 from common.api import StaticRequest, ViewResult
 from common.codec import Message
 from common.errors import InvalidRequest
-from common.pose_accuracy import PoseAccuracy
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from services.registration.api import pair_job_from_message, pair_result_message, register_scans, view_result
 from services.registration.dynamic_face import build_model_distributed, register_pair_distributed
 
 # registers PairJobMessage/PairResultMessage with the codec: a pair job is decoded before its handler runs
 from services.registration.pair_pool import PairPool
-from services.registration.pair_wire import pair_job_from_message, pair_result_message
-from services.registration.static.config import StaticConfig
-from services.registration.static.pipeline import register_view
-
-
-def view_result_message(view: int, result) -> ViewResult:  # noqa: ANN001 - static.result.StaticViewResult
-    """Wire form of a static registration result."""
-    return ViewResult(view=view, cloud=result.object_cloud, table=result.table,
-                      center=np.asarray(result.object_center, dtype=np.float64),
-                      height=float(result.object_height),
-                      scan_poses=np.stack([s.T_base_camera for s in result.scans]).astype(np.float64),
-                      figures=result.to_json())
 
 
 class RegistrationService(Service):
@@ -59,11 +45,9 @@ class RegistrationService(Service):
     async def static(self, msg: Message | None, ctx: QueryContext) -> ViewResult:
         if not isinstance(msg, StaticRequest):
             raise InvalidRequest("expected a StaticRequest", detail={"got": type(msg).__name__})
-        accuracy = PoseAccuracy.from_dict(msg.pose_accuracy) if msg.pose_accuracy else None
-        config = StaticConfig.for_profile(msg.profile).with_accuracy(accuracy)
-        result = await self.run_cpu(register_view, msg.frames, config)
+        result = await self.run_cpu(register_scans, msg.frames, msg.profile, msg.pose_accuracy)
         self.jobs_done["static"] += 1
-        return view_result_message(msg.view, result)
+        return view_result(msg.view, result)
 
     async def pair(self, msg: Message | None, ctx: QueryContext) -> Message:
         job = pair_job_from_message(msg)

@@ -121,7 +121,7 @@ def _model_errors(s: SessionData, cfg: ReportConfig, rng: np.random.Generator) -
     gt = ground_truth_points(s, cfg.gt_points) if s.simulated else None
     if gt is None:
         return None
-    from services.registration.evaluation import chamfer_metrics, point_errors
+    from services.registration.api import chamfer_metrics, point_errors
 
     acc = dict(s.accuracy or {})
     T = np.asarray(acc.get("T_gt_model", np.eye(4)), dtype=np.float64).reshape(4, 4)

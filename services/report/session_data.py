@@ -17,7 +17,7 @@ import numpy as np
 
 from common.messages import PointCloud
 from common.session_folder import SessionFolderError, read_scan_dir, read_session, scan_dir
-from services.registration.cloud import CloudError, read_ply
+from services.registration.api import CloudError, read_ply
 from services.report.errors import ReportError
 
 

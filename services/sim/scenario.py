@@ -85,7 +85,7 @@ def estimate_object(frame: RGBDFrame) -> tuple[np.ndarray, float] | None:
     """(footprint centre in base, height) of the object the frame looks at, by the static stage from the
     frame's *believed* pose, as the orchestrator estimates it; None when the stage finds no object."""
     from common.errors import ObjscanError
-    from services.registration.static import register_view
+    from services.registration.api import register_view
 
     try:
         result = register_view([frame])

@@ -14,7 +14,7 @@ from common.client import live_services
 from common.codec import decode
 from common.launcher import ProcessSpec
 from common.messages import Error, PointCloud
-from services.registration.pair_wire import PairJobMessage
+from services.registration.api import PairJobMessage
 
 
 def _job() -> PairJobMessage:

@@ -20,8 +20,8 @@ from hypothesis import strategies as st
 
 import common.api  # noqa: F401 - registers the API message types
 import common.messages  # noqa: F401 - registers the core message types
-import services.registration.pair_wire  # noqa: F401 - registers the pair job messages
 from common.codec import ArraySpec, Message, _is_optional, registered_types
+from services.registration.api import PairJobMessage  # noqa: F401 - registers the pair job messages
 
 MESSAGE_TYPES: dict[str, type[Message]] = registered_types()
 

@@ -181,7 +181,7 @@ def twin_cream_cheese_view_1():
     """View 1 (turned 30°) of the HOPE cream cheese at (0.60, 0), rendered by the twin and registered
     by the static registration, as the acquisition gets it (generated at test time, nothing stored)."""
     shared_data("hope", "cream_cheese")
-    from services.registration.static import register_view
+    from services.registration.api import register_view
     from services.sim.scenario import simulated_views
     from services.sim.world import default_object_pose
 

@@ -23,8 +23,8 @@ from common.zenoh_config import ZenohSettings, open_session
 def main(victim: str, views: int, go_file: str) -> None:
     from pathlib import Path
 
-    from services.registration.dynamic.model import build_model
-    from services.registration.dynamic_face import distributed_map, views_from_request
+    from services.registration.api import build_model, views_from_results
+    from services.registration.dynamic_face import distributed_map
     from tests.registration.test_distributed_workers import _requests
 
     session = open_session(ZenohSettings.from_env())
@@ -33,7 +33,8 @@ def main(victim: str, views: int, go_file: str) -> None:
         if time.monotonic() > deadline:
             raise SystemExit(f"cell not live: {live_services(session)}")
         time.sleep(0.5)
-    dyn_views = views_from_request(_requests(views))
+    request = _requests(views)
+    dyn_views = views_from_results(request.views, request.turns_deg)
     stats: dict = {}
     result: dict = {}
 

@@ -22,7 +22,7 @@ from common.messages import PointCloud, Request
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.machine import Acquisition
 from services.recording.recorder import SessionRecorder
-from services.registration.cloud import read_ply, write_ply
+from services.registration.api import read_ply, write_ply
 from services.session_store import RESERVE, SessionStore
 from tests.orchestrator.test_run_ends import RefusingCell
 

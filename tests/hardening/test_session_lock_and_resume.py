@@ -18,7 +18,7 @@ import pytest
 from common.messages import PointCloud
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.machine import Acquisition
-from services.registration.cloud import read_ply, write_ply
+from services.registration.api import read_ply, write_ply
 from services.session_store import SessionLocked, SessionStore
 from tests.orchestrator.test_run_ends import RefusingCell
 

@@ -16,7 +16,7 @@ from common.errors import ObjscanError
 from common.messages import Intrinsics, RGBDFrame
 from common.session_folder import read_scan, write_scan
 from services.orchestrator.cell import POSE_ATTEMPTS, Cell
-from services.registration.cloud import check_frame, frame_to_cloud
+from services.registration.api import check_frame, frame_to_cloud
 
 
 def _frame(pose_source: str) -> RGBDFrame:

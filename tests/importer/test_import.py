@@ -138,8 +138,7 @@ def test_castard_imports_and_reconstructs_into_a_closed_model(tmp_path):
     """Every other castard frame (~38 degrees a step, turns estimated): the import self-calibrates the focal
     length (a full turn), reconstruct registers the views as turns on the one table and the loop closes.
     The figures of the full sequence come from ``objscan bench real``; here the chain must just hold."""
-    from services.registration.dynamic.model import DynamicConfig
-    from services.registration.reconstruct import reconstruct
+    from services.registration.api import DynamicConfig, reconstruct
 
     seq = shared_data("real_sequences", "castard_d415")
     report = import_sequence(seq, tmp_path / "s", parse_intrinsics(INTR), ImportConfig(every=2))

@@ -10,7 +10,7 @@ import pytest
 from common.geometry import look_at
 from common.messages import Intrinsics, RGBDFrame
 from services.importer.selfcal import FocalSearchConfig, calibrate_focal, rescale_points, scale_intrinsics
-from services.registration.cloud import frame_points
+from services.registration.api import frame_points
 from tests.conftest import shared_data
 
 

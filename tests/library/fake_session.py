@@ -17,11 +17,14 @@ import numpy as np
 
 from common.session_folder import atomic_write_json
 from services.grasp.planner import plan_grasps_for_cloud
-from services.registration.cloud import write_ply
-from services.registration.dynamic.model import DynamicConfig, build_model
-from services.registration.dynamic.views import view_from_static
-from services.registration.evaluation import evaluate_model
-from services.registration.static.pipeline import register_view
+from services.registration.api import (
+    DynamicConfig,
+    build_model,
+    evaluate_model,
+    register_view,
+    view_from_static,
+    write_ply,
+)
 from services.sim.scenario import simulated_views, true_object_points, write_session
 
 

@@ -42,7 +42,7 @@ def hope_library(tmp_path_factory):
 
 def partial_view(name: str, yaw_deg: float = 100.0, seed: int = 11):
     """One isolated view of ``name`` as an acquisition's static stage gives it (xyz, rgb in base)."""
-    from services.registration.static.pipeline import register_view
+    from services.registration.api import register_view
     from services.sim.scenario import simulated_views
     from services.sim.world import default_object_pose
 

@@ -30,8 +30,9 @@ def view_results():
     for v in scan.views[:VIEWS]:
         cloud = PointCloud(xyz=np.asarray(v.xyz, np.float32), rgb=np.asarray(v.rgb, np.uint8),
                            normals=np.asarray(v.normals, np.float32))
-        out.append(ViewResult(view=v.index, cloud=cloud, table=v.table, center=np.asarray(v.center, float),
-                              height=0.19, scan_poses=np.zeros((0, 4, 4))))
+        # the wire carries the static stage's footprint centre and the height (the table is z = 0 here)
+        out.append(ViewResult(view=v.index, cloud=cloud, table=v.table, center=np.asarray(v.center, float) * [1, 1, 0],
+                              height=2 * float(v.center[2]), scan_poses=np.zeros((0, 4, 4))))
     return out, [v.commanded_turn_deg for v in scan.views[:VIEWS]]
 
 
@@ -49,8 +50,7 @@ class PairCell:
         self.dynamic_config: dict | None = None
 
     async def register_pair(self, msg):  # noqa: ANN001, ANN201
-        from services.registration.dynamic.pair import PairResult
-        from services.registration.pair_wire import pair_job_from_message, pair_result_message
+        from services.registration.api import PairResult, pair_job_from_message, pair_result_message
 
         job = pair_job_from_message(msg)
         self.jobs.append((job.source_view, job.target_view))

@@ -116,7 +116,7 @@ def test_recorded_frames_are_the_saved_frames(recorded):
 def test_recorded_payloads_are_what_the_codec_sends(recorded):
     """Re-encoding a decoded payload gives the same bytes: the recorded bytes are the wire bytes."""
     from common.codec import decode
-    from services.registration import pair_wire  # noqa: F401  registers the pair jobs' messages the run sent
+    from services.registration.api import PairJobMessage  # noqa: F401 - registers the pair job messages
 
     rec = read_recording(recorded)
     for ex in rec.exchanges:
@@ -160,7 +160,7 @@ def test_foxglove_channels_decode_with_their_embedded_protobuf_schemas(recorded)
     from mcap_protobuf.decoder import DecoderFactory
 
     from common.session_folder import read_scan
-    from services.registration.cloud import read_ply
+    from services.registration.api import read_ply
 
     first: dict[str, object] = {}
     last_model = None

@@ -23,7 +23,8 @@ def _requests(n_views: int = 12) -> DynamicRequest:
                                                        rgb=np.asarray(v.rgb, np.uint8),
                                                        normals=None if v.normals is None else
                                                        np.asarray(v.normals, np.float32)),
-                        table=v.table, center=np.asarray(v.center, float), height=0.19,
+                        # the footprint centre and the height, as the static stage sends them (table: z = 0)
+                        table=v.table, center=np.asarray(v.center, float) * [1, 1, 0], height=2 * float(v.center[2]),
                         scan_poses=np.zeros((0, 4, 4))) for v in scan.views]
     return DynamicRequest(views=views, turns_deg=[v.commanded_turn_deg for v in scan.views])
 

@@ -173,7 +173,7 @@ def test_no_early_job_when_it_could_still_change(views):
 
 def test_reused_results_travel_exactly_and_malformed_ones_are_refused():
     from common.errors import InvalidRequest
-    from services.registration.dynamic_face import dynamic_config
+    from services.registration.api import dynamic_config
     from services.registration.pair_wire import pair_record, reuse_records
 
     rng = np.random.default_rng(0)

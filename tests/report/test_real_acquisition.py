@@ -64,7 +64,7 @@ def test_report_and_library_entry_of_a_real_acquisition(tmp_path):
     entry_id = add_session_model(tmp_path / "models", out)
     lib = ModelLibrary(tmp_path / "models")
     assert lib.get(entry_id).metadata.object_name == "milk"
-    from services.registration.cloud import read_ply
+    from services.registration.api import read_ply
 
     view0 = read_ply(out / "view_00" / "object.ply")
     best = lib.find(view0.xyz, top_k=1, rgb=view0.rgb)[0]

@@ -24,6 +24,7 @@ import open3d as o3d
 from sklearn.cluster import KMeans
 
 from common.geometry import make_transform, rotation_about_line
+from services.registration.cloud import to_o3d
 from services.registration.dynamic.views import DynamicRegistrationError, DynamicView, validate_views
 
 
@@ -70,10 +71,7 @@ class Cloud:
         return Cloud(xyz, self.rgb, nrm)
 
     def to_o3d(self) -> o3d.geometry.PointCloud:
-        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(self.xyz.astype(np.float64)))
-        pcd.colors = o3d.utility.Vector3dVector(self.rgb.astype(np.float64) / 255.0)
-        pcd.normals = o3d.utility.Vector3dVector(self.normals.astype(np.float64))
-        return pcd
+        return to_o3d(self.xyz, self.rgb, self.normals)
 
     @classmethod
     def from_o3d(cls, pcd: o3d.geometry.PointCloud) -> Cloud:

@@ -86,17 +86,25 @@ def validate_views(views: list[DynamicView], min_views: int = 3) -> None:
         v.validate()
 
 
+def view_center(footprint_center: np.ndarray, table_normal: np.ndarray, height: float) -> np.ndarray:
+    """The one definition of a view's centre, from what the static stage reports: the object's footprint
+    centre on the table and its height.
+
+    The dynamic stage stacks the views on this point and ``pair.crop_to_overlap`` projects the unit-sphere
+    crop from it, so every path (live scan, incremental model, replay, reconstruct, import, benchmarks) must
+    place it the same way: the centre of the object body, the footprint lifted by half the object's height
+    along the table normal.
+    """
+    n = np.asarray(table_normal, dtype=float)
+    return np.asarray(footprint_center, dtype=float) + 0.5 * float(height) * n
+
+
 def view_from_static(result, commanded_turn_deg: float, index: int = 0,
                      T_view0_view_true: np.ndarray | None = None) -> DynamicView:
-    """A ``DynamicView`` from the static stage's ``StaticViewResult`` (``services/registration/static``).
-
-    The static stage reports the object's footprint centre on the table; the dynamic stage wants the
-    centre of the object body (the point the unit-sphere crop projects from), so it is lifted by half
-    the object's height along the table normal.
-    """
+    """A ``DynamicView`` from the static stage's ``StaticViewResult`` (``services/registration/static``),
+    its centre placed by ``view_center`` like every other path's."""
     cloud = result.object_cloud
-    n = np.asarray(result.table.normal, dtype=float)
-    center = np.asarray(result.object_center, dtype=float) + 0.5 * float(result.object_height) * n
+    center = view_center(result.object_center, result.table.normal, result.object_height)
     xyz = np.asarray(cloud.xyz, dtype=np.float32)
     rgb = np.asarray(cloud.rgb, dtype=np.uint8) if cloud.rgb is not None else np.full(xyz.shape, 128, np.uint8)
     nrm = None if cloud.normals is None else np.asarray(cloud.normals, dtype=np.float32)
