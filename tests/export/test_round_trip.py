@@ -15,8 +15,7 @@ import numpy as np
 import pytest
 
 from services.export import export_session
-from services.registration.cloud import read_ply
-from services.registration.evaluation import evaluate_model
+from services.registration.api import evaluate_model, read_ply
 from tests.conftest import shared_data
 from tests.report.test_real_acquisition import free_port
 
