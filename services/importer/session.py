@@ -2,8 +2,9 @@
 
 The session is what ``objscan reconstruct`` reads: one view per frame (``view_KK/scan_0``) with the fixed
 camera's pose in the table-based ``base``, and ``session.json`` with the cumulative turns (given or
-estimated) and an ``import`` block saying how they were found. A frame whose object cannot be isolated
-(``no_object``, ``empty_depth``) is left out and named in the report.
+estimated) and an ``import`` block saying how they were found. A frame that cannot be read (no partner,
+unreadable, not aligned) or whose object cannot be isolated (``no_object``, ``empty_depth``) is left out with a
+one-line warning and named in the report (``skipped``, ``skipped_count``).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from common.session_folder import new_folder_refusal, write_scan, write_session
 from services.importer.base_frame import BaseFrameConfig, estimate_base_frame
 from services.importer.errors import ImportError_, OutNotEmpty
 from services.importer.selfcal import FocalSearchConfig, calibrate_focal, scale_intrinsics
-from services.importer.sources import MAX_FRAMES, read_frames
+from services.importer.sources import MAX_FRAMES, log, read_frames, skip
 from services.importer.turns import DIRECTIONS, pair_searches, plan_turns
 from services.registration.dynamic.turn4dof import TurnSearchConfig
 from services.registration.dynamic.views import view_from_static
@@ -67,25 +68,28 @@ def import_sequence(source: str | Path, out_dir: str | Path, intrinsics: Intrins
     t0 = time.perf_counter()
     out = Path(out_dir)
     _check_out(out)
-    frames = read_frames(source, intrinsics, cfg.depth_scale, cfg.every, cfg.max_frames)
+    skipped: list[dict] = []  # frames left out (read: unpaired, unreadable; isolate: no object), one warning each
+    frames = read_frames(source, intrinsics, cfg.depth_scale, cfg.every, cfg.max_frames, skipped)
     say({"stage": "read", "frames": len(frames), "seconds": round(time.perf_counter() - t0, 2)})
     base = estimate_base_frame(frames, cfg.base, st)
     say({"stage": "base_frame", "camera_height_m": round(base.camera_height_m, 4),
          "look_down_deg": round(base.look_down_deg, 1)})
-    kept, views, skipped = [], [], []
-    for k, f in enumerate(frames):
+    kept, views = [], []
+    for f in frames:
         f.T_base_camera = base.T_base_camera.copy()
         try:
             res = register_view([f], st)
         except ObjscanError as exc:
-            skipped.append({"frame": k, "seq": f.seq, "code": exc.code, "message": exc.message})
+            skip(skipped, f.seq, exc.code, exc.message, stage="isolate")
             continue
         kept.append(f)
         views.append(view_from_static(res, 0.0, index=len(views)))
-        say({"stage": "isolate", "frame": k, "of": len(frames), "points": len(res.object_cloud)})
+        say({"stage": "isolate", "frame": f.seq, "of": len(frames), "points": len(res.object_cloud)})
+    if skipped:
+        log.warning("%d frames skipped in all; %d views imported", len(skipped), len(views))
     if len(views) < 3:
-        raise ImportError_("fewer than 3 frames show an object standing on the table", code="too_few_views",
-                           detail={"kept": len(views), "skipped": skipped[:10]})
+        raise ImportError_(f"fewer than 3 frames show an object standing on the table ({len(skipped)} skipped)",
+                           code="too_few_views", detail={"kept": len(views), "skipped": skipped[:10]})
     searches = pair_searches(views, cfg.turn_search)
     plan = plan_turns(searches, cfg.turn_step_deg, cfg.direction)
     say({"stage": "turns", "source": plan.source, "direction": plan.direction,
@@ -108,6 +112,7 @@ def import_sequence(source: str | Path, out_dir: str | Path, intrinsics: Intrins
         "frames": len(frames),
         "views": len(kept),
         "skipped": skipped,
+        "skipped_count": len(skipped),
         "base_frame": base.to_json(),
         "turns": plan.to_json(),
         "focal_calibration": calib.to_json(),
