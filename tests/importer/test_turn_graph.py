@@ -1,0 +1,106 @@
+"""Turns checked by the loop: a full-turn sequence is solved jointly over its view graph, a given turntable
+step is a strong prior, and what cannot be told is reported unsure. Built on synthetic 4-DoF search results
+(a sweep scored like the search's, peaks where the views would match), so the solver is tested alone, fast."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.importer.turn_graph import TurnGraphConfig
+from services.importer.turns import plan_turns
+from services.registration.dynamic.turn4dof import TurnResult
+
+GRID = np.arange(-180.0, 180.0, 7.5)
+
+
+def _search(turns: list[float] | float, fitness: float = 0.7, heights: list[float] | None = None) -> TurnResult:
+    """A search result whose sweep peaks where the object turned by ``turns`` (the first is the refined best):
+    the search's yaw maps the later view back, i.e. minus the turn."""
+    turns = [turns] if isinstance(turns, (int, float)) else list(turns)
+    heights = heights or [1.0] + [0.6] * (len(turns) - 1)
+    score = 0.2 + sum(h * np.exp(-0.5 * (((GRID + t + 180) % 360 - 180) / 6.0) ** 2) for t, h in zip(turns, heights))
+    return TurnResult(T=np.eye(4), yaw_deg=-turns[0], shift=np.zeros(3), fitness=fitness, rmse=0.001,
+                      color_fitness=0.5, sweep=[(float(y), float(s)) for y, s in zip(GRID, score, strict=True)])
+
+
+def _wrap(d: float) -> float:
+    return (d + 180.0) % 360.0 - 180.0
+
+
+def test_a_full_turn_whose_estimates_undercount_the_turns_is_solved_to_a_full_turn():
+    """12 views 30 degrees apart; three neighbour estimates say the object hardly turned (a face matched onto
+    its look-alike): summed, the estimates fall 84 degrees short. The last view overlaps the first, so the
+    turns must add up to a full turn, and the pairs two views apart say where the three went wrong."""
+    rng = np.random.default_rng(0)
+    n, step, wrong = 12, 30.0, {2, 6, 9}
+    neigh = [_search(2.0 if k in wrong else step + rng.normal(0, 1.0)) for k in range(n - 1)]
+    assert sum(-r.yaw_deg for r in neigh) < 300  # the estimates alone under-count
+    further = {(i, (i + 2) % n): _search(2 * step + rng.normal(0, 1.0)) for i in range(n)}
+    closing = _search(step + rng.normal(0, 1.0))
+    plan = plan_turns(neigh, None, "unknown", closing=closing, further=further)
+    loop = plan.loop
+    assert loop.loop_closes and plan.status == "closed", loop.reasons
+    assert plan.total_turn_deg == pytest.approx(360.0, abs=1e-6)
+    turns = np.diff(plan.cumulative_deg)
+    assert np.all(np.abs(turns - step) < 3.0), turns  # every turn right, the three wrong ones too
+    assert plan.direction == "ccw"
+    assert {(p["from"], p["to"]) for p in loop.unsure_pairs} == {(k, k + 1) for k in wrong}
+    assert all("contradicts" in p["why"] for p in loop.unsure_pairs)
+
+
+def test_one_bad_neighbour_pair_cannot_open_the_loop():
+    """Neighbours only (no pair further apart): one pair flipped by a symmetric face; clockwise 20-degree steps.
+    Chained, the loop is open by ~180 degrees; solved with the loop, the bad pair takes the missing turn."""
+    n, step = 18, -20.0
+    neigh = [_search(160.0 if k == 7 else step) for k in range(n - 1)]
+    plan = plan_turns(neigh, None, "unknown", closing=_search(step), graph=TurnGraphConfig(reach=1))
+    turns = np.diff(plan.cumulative_deg)
+    assert plan.status == "closed" and plan.direction == "cw"
+    assert plan.total_turn_deg == pytest.approx(-360.0, abs=1e-6)
+    assert np.all(np.abs(turns - step) < 3.0), turns
+    assert [(p["from"], p["to"]) for p in plan.loop.unsure_pairs] == [(7, 8)]
+
+
+def test_a_turntable_with_a_given_step_keeps_it_when_the_pair_estimates_disagree():
+    """8 x 45 degrees given (the turntable's step, stated to 2 degrees); half the pair estimates say -20 (a
+    plush toy's look-alike sides), which summed give a total turn far from a full turn. The step stands: each
+    turn stays within its uncertainty, the loop closes on a full turn, and the disagreeing pairs are named."""
+    n, step = 8, 45.0
+    est = [45.5, -20.0, 44.0, -20.0, -20.0, 46.0, -20.0]
+    neigh = [_search(t) for t in est]
+    plan = plan_turns(neigh, step, "unknown", closing=_search(-20.0), step_sigma_deg=2.0)
+    turns = np.diff(plan.cumulative_deg)
+    assert np.all(np.abs(turns - step) <= 2.0 + 1e-9), turns
+    assert plan.total_turn_deg == pytest.approx(360.0, abs=1e-6)
+    assert plan.loop.loop_closes and plan.status == "closed", plan.loop.reasons
+    assert {p["from"] for p in plan.loop.disagreeing_pairs} == {1, 3, 4, 6, 7}
+    # an estimate within the stated uncertainty refines its turn: the step is a prior, not a constant
+    assert turns[0] > 45.0 and turns[2] < 45.0
+
+
+def test_a_given_step_that_does_not_close_the_full_turn_it_claims_is_unsure():
+    """The last view overlaps the first, yet 8 x 30 degrees is 240: the step or the frames are wrong."""
+    neigh = [_search(45.0) for _ in range(7)]
+    plan = plan_turns(neigh, 30.0, "ccw", closing=_search(45.0))
+    assert plan.status == "unsure" and "not a full turn" in " ".join(plan.loop.reasons)
+
+
+def test_a_symmetric_object_is_reported_unsure_with_the_reason():
+    """Every pair's sweep peaks as high half a turn away (a box with the same print on opposite sides)."""
+    n, step = 10, 36.0
+    neigh = [_search([step, step + 180.0], heights=[1.0, 1.0]) for _ in range(n - 1)]
+    plan = plan_turns(neigh, None, "unknown", closing=_search([step, step + 180.0], heights=[1.0, 1.0]),
+                      graph=TurnGraphConfig(reach=1))
+    assert plan.status == "unsure"
+    assert "look-alike" in " ".join(plan.loop.reasons)
+    assert all("look-alike" in p["why"] for p in plan.loop.unsure_pairs)
+
+
+def test_a_partial_turn_is_open_not_forced_to_a_full_turn():
+    """Six views 15 degrees apart: the last view is 75 degrees from the first, which is no closing step."""
+    neigh = [_search(15.0) for _ in range(5)]
+    plan = plan_turns(neigh, None, "unknown", closing=_search(-75.0, fitness=0.5))
+    assert not plan.loop.loop_closes and plan.status == "open"
+    assert plan.total_turn_deg == pytest.approx(75.0, abs=1e-6)
+    assert "partial turn" in plan.loop.closing["why"]
