@@ -23,7 +23,8 @@ from services.importer.base_frame import BaseFrameConfig, estimate_base_frame
 from services.importer.errors import ImportError_, OutNotEmpty
 from services.importer.selfcal import FocalSearchConfig, calibrate_focal, scale_intrinsics
 from services.importer.sources import MAX_FRAMES, log, read_frames, skip
-from services.importer.turns import DIRECTIONS, pair_searches, plan_turns
+from services.importer.turn_graph import TurnGraphConfig
+from services.importer.turns import DIRECTIONS, graph_searches, pair_searches, plan_turns
 from services.registration.dynamic.turn4dof import TurnSearchConfig
 from services.registration.dynamic.views import view_from_static
 from services.registration.static import StaticConfig, register_view
@@ -34,6 +35,8 @@ class ImportConfig:
     """What the user knows about the sequence; everything else is estimated."""
 
     turn_step_deg: float | None = None  # None: estimate each turn
+    # the given step's stated uncertainty (deg): estimates further off do not move a turn (None: the graph's)
+    turn_step_sigma_deg: float | None = None
     direction: str = "unknown"  # "ccw" | "cw" (seen from above) | "unknown": try both
     every: int = 1  # keep one frame in this many (a 30 fps recording of a slow turntable), applied while reading
     max_frames: int = MAX_FRAMES  # frames kept at most (they are held until the turns are found)
@@ -42,6 +45,7 @@ class ImportConfig:
     base: BaseFrameConfig = field(default_factory=BaseFrameConfig)
     turn_search: TurnSearchConfig = field(default_factory=TurnSearchConfig)
     focal: FocalSearchConfig = field(default_factory=FocalSearchConfig)  # self-calibration of fx, fy
+    graph: TurnGraphConfig = field(default_factory=TurnGraphConfig)  # the view graph and the loop (turn_graph)
 
     def __post_init__(self) -> None:
         if self.direction not in DIRECTIONS:
@@ -91,11 +95,20 @@ def import_sequence(source: str | Path, out_dir: str | Path, intrinsics: Intrins
         raise ImportError_(f"fewer than 3 frames show an object standing on the table ({len(skipped)} skipped)",
                            code="too_few_views", detail={"kept": len(views), "skipped": skipped[:10]})
     searches = pair_searches(views, cfg.turn_search)
-    plan = plan_turns(searches, cfg.turn_step_deg, cfg.direction)
-    say({"stage": "turns", "source": plan.source, "direction": plan.direction,
+    closing, further = graph_searches(views, cfg.graph.reach, cfg.turn_search)
+    plan = plan_turns(searches, cfg.turn_step_deg, cfg.direction, closing, further, cfg.turn_step_sigma_deg,
+                      cfg.graph)
+    loop = plan.loop
+    assert loop is not None
+    say({"stage": "turns", "source": plan.source, "direction": plan.direction, "status": plan.status,
+         "total_turn_deg": round(plan.total_turn_deg, 1),
          "median_turn_deg": round(float(np.median(np.abs(plan.pair_yaw_deg))), 2)})
-    calib = calibrate_focal(views, base.T_base_camera, searches, float(np.sum(plan.pair_yaw_deg)),
-                            kept[0].intrinsics, cfg.focal)
+    for pair in loop.unsure_pairs:
+        log.warning("turn %d -> %d unsure: %s", pair["from"], pair["to"], pair["why"])
+    for why in loop.reasons:
+        log.warning("turns unsure: %s", why)
+    calib = calibrate_focal(views, base.T_base_camera, searches, plan.total_turn_deg, kept[0].intrinsics,
+                            cfg.focal, turns_deg=list(np.diff(plan.cumulative_deg)), loop_closes=loop.loop_closes)
     if calib.applied:  # the written frames carry the corrected intrinsics; the table is fitted again with them
         for f in frames:
             f.intrinsics = scale_intrinsics(f.intrinsics, calib.scale)
@@ -118,14 +131,17 @@ def import_sequence(source: str | Path, out_dir: str | Path, intrinsics: Intrins
         "focal_calibration": calib.to_json(),
         "seconds": round(time.perf_counter() - t0, 3),
     }
-    write_session(out, {
+    session = {
         "object": cfg.object_name,
         "profile": "imported",
         "camera": "fixed",  # reconstruct: every view differs by a turn on the one table (pair.turn_only)
         "views": [{"index": k, "commanded_turn_deg": round(c, 4), "turn_source": plan.source}
                   for k, c in enumerate(plan.cumulative_deg)],
         "import": report,
-    })
+    }
+    if cfg.turn_step_deg is not None:  # a turntable's step: the model's turns are judged against it
+        session["turn_accuracy_deg"] = cfg.turn_step_sigma_deg or cfg.graph.step_sigma_deg
+    write_session(out, session)
     return report
 
 

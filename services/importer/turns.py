@@ -88,7 +88,7 @@ def graph_searches(views: list[DynamicView], reach: int, config: TurnSearchConfi
     n = len(views)
     closing = search_pair(views[-1], views[0], config)
     further = {}
-    for d in range(2, min(reach, n - 1) + 1):
+    for d in range(2, min(reach, n - 2) + 1):  # beyond n - 2 a pair is a neighbour pair the other way round
         for i in range(n):
             further[(i, (i + d) % n)] = search_pair(views[i], views[(i + d) % n], config)
     return closing, further

@@ -66,7 +66,7 @@ def test_a_turntable_with_a_given_step_keeps_it_when_the_pair_estimates_disagree
     """8 x 45 degrees given (the turntable's step, stated to 2 degrees); half the pair estimates say -20 (a
     plush toy's look-alike sides), which summed give a total turn far from a full turn. The step stands: each
     turn stays within its uncertainty, the loop closes on a full turn, and the disagreeing pairs are named."""
-    n, step = 8, 45.0
+    step = 45.0  # 8 views
     est = [45.5, -20.0, 44.0, -20.0, -20.0, 46.0, -20.0]
     neigh = [_search(t) for t in est]
     plan = plan_turns(neigh, step, "unknown", closing=_search(-20.0), step_sigma_deg=2.0)
