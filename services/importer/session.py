@@ -50,6 +50,8 @@ class ImportConfig:
     def __post_init__(self) -> None:
         if self.direction not in DIRECTIONS:
             raise ValueError(f"direction must be one of {DIRECTIONS}, got {self.direction!r}")
+        if self.turn_step_sigma_deg is not None and not (0 < self.turn_step_sigma_deg < 90):
+            raise ValueError(f"turn_step_sigma_deg must be in (0, 90), got {self.turn_step_sigma_deg}")
         if self.turn_step_deg is not None and not (0 < abs(self.turn_step_deg) < 180):
             raise ValueError(f"turn_step_deg must be in (0, 180), got {self.turn_step_deg}")
         if self.every < 1:
