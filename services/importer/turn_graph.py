@@ -54,6 +54,12 @@ class TurnGraphConfig:
     iterations: int = 30
     alternative_ratio: float = 0.85  # a sweep peak scoring this share of the best is a look-alike turn
     min_separation_deg: float = 20.0  # ... and at least this far from the best
+    # more look-alikes than this (a sweep with no turn standing out: a body of revolution, no texture) cannot
+    # be resolved by the loop; fewer (a box's 90/180-degree twins) are, when the solution admits only one
+    max_lookalikes: int = 3
+    direction_margin: float = 2.0  # both directions' costs closer than this: the direction is not told
+    backward_tolerance_deg: float = 5.0  # an estimate this far the other way is noise on a small turn, not wrong
+    min_turn_deg: float = 0.5  # a turn solved the wrong way is held at this much the right way
     min_fitness: float = 0.25  # a pair fitting less than this overlaps too little to tell its turn
     min_supported: float = 0.5  # a closed loop needs this share of turns supported by their own best estimate
     max_contradicted: float = 1.0 / 3.0  # ... and at most this share contradicted by the solution
@@ -124,6 +130,8 @@ class GraphSolution:
     chosen: list[float]  # per edge, the alternative used
     residual: list[float]  # per edge, deg
     inlier: list[bool]
+    edges: list[Edge]  # the edges used (a wrapping edge is used only when the loop closes)
+    fitting: list[int]  # per edge, how many of its alternatives the solution admits (2+: still ambiguous)
 
 
 def solve_graph(n: int, edges: list[Edge], winding: int, cfg: TurnGraphConfig,
@@ -133,7 +141,8 @@ def solve_graph(n: int, edges: list[Edge], winding: int, cfg: TurnGraphConfig,
     (the loop), 0 leaves the sequence open (wrapping edges unused). ``step`` (signed) adds a prior on every
     neighbour turn with ``step_sigma``; without a step, a closed loop adds a weak prior toward its mean step."""
     m = n + 1 if winding else n  # unknowns 1..m-1 (view 0 fixed at 0; view n fixed at 360 * winding)
-    used = [e for e in edges if winding or not e.wraps]
+    # edges between views further apart than neighbours are used only when they overlap enough to tell
+    used = [e for e in edges if (winding or not e.wraps) and (e.j == (e.i + 1) % n or e.fitness >= cfg.min_fitness)]
     if init is not None:
         theta = np.asarray(init, dtype=float).copy()
     elif step is not None:
@@ -141,6 +150,13 @@ def solve_graph(n: int, edges: list[Edge], winding: int, cfg: TurnGraphConfig,
     else:
         theta = 360.0 * winding * np.arange(n, dtype=float) / n
     full = 360.0 * winding
+    # the object is turned one way (by hand or by a turntable): every turn, and so every edge from an earlier
+    # to a later view, has the direction's sign; an alternative the other way (beyond a small tolerance for
+    # noise on tiny steps) is not one
+    sign = int(winding) if winding else (int(np.sign(step)) if step else 0)
+
+    def allowed(e: Edge) -> list[tuple[float, float]]:
+        return [cs for cs in e.candidates if not sign or cs[0] * sign > -cfg.backward_tolerance_deg]
 
     def pos(k: int, wraps: bool) -> int:
         return n if wraps else k
@@ -151,23 +167,24 @@ def solve_graph(n: int, edges: list[Edge], winding: int, cfg: TurnGraphConfig,
         priors += [(k, k + 1, step, sig) for k in range(m - 1)]
     elif winding:
         priors += [(k, k + 1, full / n, cfg.spread_sigma_deg) for k in range(m - 1)]
+    pinned: set[int] = set()  # turns solved the wrong way: held at the smallest turn the right way
     chosen = [e.best for e in used]
-    weights = np.ones(len(used))
     for _ in range(cfg.iterations):
         ext = np.append(theta, full) if winding else theta
         rows, rhs, w = [], [], []
         for q, e in enumerate(used):
+            cands = allowed(e)
+            if not cands:
+                continue
             a, b = e.i, pos(e.j, e.wraps)
             pred = ext[b] - ext[a]
             # two views that overlap are less than half a turn apart: a turn is its estimate, never that
             # plus a whole turn (which would let any edge absorb a full turn unseen)
-            c, sig = min(e.candidates, key=lambda cs: abs(cs[0] - pred))
-            meas = c
+            c, sig = min(cands, key=lambda cs: abs(cs[0] - pred))
             chosen[q] = c
             r = (c - pred) / sig
-            weights[q] = 1.0 / (1.0 + (r / cfg.cauchy_sigmas) ** 2)
-            rows.append((a, b)), rhs.append(meas), w.append(weights[q] / sig**2)
-        for a, b, turn, sig in priors:
+            rows.append((a, b)), rhs.append(c), w.append(1.0 / (1.0 + (r / cfg.cauchy_sigmas) ** 2) / sig**2)
+        for a, b, turn, sig in priors + [(k, k + 1, sign * cfg.min_turn_deg, 0.5) for k in sorted(pinned)]:
             rows.append((a, b)), rhs.append(turn), w.append(1.0 / sig**2)
         A = np.zeros((len(rows), m))
         for r_, (a, b) in enumerate(rows):
@@ -179,24 +196,30 @@ def solve_graph(n: int, edges: list[Edge], winding: int, cfg: TurnGraphConfig,
         sw = np.sqrt(np.asarray(w))
         sol, *_ = np.linalg.lstsq((A[:, 1:n]) * sw[:, None], y * sw, rcond=None)
         new = np.concatenate([[0.0], sol])
-        if np.max(np.abs(new - theta)) < 1e-4:
+        turns = np.diff(np.append(new, full) if winding else new)
+        wrong = {k for k, t in enumerate(turns) if sign and t * sign < cfg.min_turn_deg - 1e-6} - pinned
+        pinned |= wrong
+        if not wrong and np.max(np.abs(new - theta)) < 1e-4:
             theta = new
             break
         theta = new
     ext = np.append(theta, full) if winding else theta
-    residual, inlier, cost = [], [], 0.0
+    residual, inlier, fitting, cost = [], [], [], 0.0
     for e, c in zip(used, chosen, strict=True):
         pred = ext[pos(e.j, e.wraps)] - ext[e.i]
         res = float(c - pred)
         sig = dict(e.candidates)[c]
+        ok = bool(allowed(e))
         residual.append(res)
-        inlier.append(abs(res) <= cfg.outlier_sigmas * max(sig, cfg.pair_sigma_deg))
-        cost += float(np.log1p((res / (cfg.cauchy_sigmas * sig)) ** 2))
+        inlier.append(ok and abs(res) <= cfg.outlier_sigmas * max(sig, cfg.pair_sigma_deg))
+        fitting.append(sum(abs(a - pred) <= cfg.outlier_sigmas * max(sa, cfg.pair_sigma_deg)
+                           for a, sa in allowed(e)))
+        # robust and bounded: an outlier costs the same however far off (or the wrong way), so the
+        # hypotheses compare by how many edges they explain, not by how wild the ones they do not explain are
+        cap = float(np.log1p((cfg.outlier_sigmas / cfg.cauchy_sigmas) ** 2))
+        cost += min(cap, float(np.log1p((res / (cfg.cauchy_sigmas * sig)) ** 2))) if ok else cap
         cost += 0.0 if c == e.best else 1.0  # an alternative is less likely than the best
-    out = GraphSolution(theta, winding, cost, list(chosen), residual, inlier)
-    out_edges = used
-    out.edges = out_edges  # type: ignore[attr-defined]
-    return out
+    return GraphSolution(theta, winding, cost, list(chosen), residual, inlier, used, fitting)
 
 
 @dataclass
@@ -270,16 +293,28 @@ def solve_turns(n: int, edges: list[Edge], closing: Edge | None, direction: str,
     if closes:
         sols = {s: solve_graph(n, all_edges, s, cfg, None if step_deg is None else s * abs(step_deg), sig_step)
                 for s in signs}
-        sol = min(sols.values(), key=lambda x: x.cost)
         costs = {("ccw" if s > 0 else "cw"): round(x.cost, 3) for s, x in sols.items()}
-        q = [k for k, e in enumerate(sol.edges) if e is closing][0]  # type: ignore[attr-defined]
-        # the closing pair matches, but not at the turn a full turn leaves for it (a given step decides that
-        # turn itself: an estimate off the step is one more disagreeing pair)
-        if not sol.inlier[q] and step_deg is None:
+
+        def closing_fits(x: GraphSolution) -> bool:
+            q = [k for k, e in enumerate(x.edges) if e is closing][0]
+            return x.inlier[q]
+
+        # the closing pair must match where a full turn that way leaves it (a given step decides that turn
+        # itself: an estimate off the step is one more disagreeing pair)
+        fits = {s: x for s, x in sols.items() if step_deg is not None or closing_fits(x)}
+        if not fits:
+            best = min(sols.values(), key=lambda x: x.cost)
+            q = [k for k, e in enumerate(best.edges) if e is closing][0]
             closes, closing_info = False, {**closing_info, "why": (
-                f"the last view matches the first at {closing.best:+.0f} deg, {sol.residual[q]:+.0f} deg from "
+                f"the last view matches the first at {closing.best:+.0f} deg, {best.residual[q]:+.0f} deg from "
                 "where a full turn puts it: a partial turn")}
-            sol = None
+        else:
+            sol = min(fits.values(), key=lambda x: x.cost)
+            if direction == "unknown" and len(fits) == 2:
+                a, b = sorted(x.cost for x in fits.values())
+                if b - a < cfg.direction_margin:
+                    reasons.append(f"the turns do not tell the direction: a full turn either way fits them "
+                                   f"about as well (costs {costs})")
     if closes and sol is not None:
         angles = list(sol.angles) + [360.0 * sol.winding]
     else:
@@ -299,7 +334,7 @@ def solve_turns(n: int, edges: list[Edge], closing: Edge | None, direction: str,
     if closing_turn is not None:
         closing_info["solved_deg"] = round(closing_turn, 2)
     edge_rows, unsure, disagree = [], [], []
-    used = getattr(sol, "edges", []) if sol is not None else []
+    used = sol.edges if sol is not None else []
     index = {id(e): q for q, e in enumerate(used)}
     for e in all_edges:
         q = index.get(id(e))
@@ -307,14 +342,20 @@ def solve_turns(n: int, edges: list[Edge], closing: Edge | None, direction: str,
         if e.j != (e.i + 1) % n:
             continue  # further pairs support the neighbours; the neighbours are what is judged
         why = []
-        if e.ambiguous:
-            why.append(e.ambiguous)
+        # a look-alike turn the solved loop rules out (only one alternative fits it) is resolved; a sweep with
+        # look-alikes all round is not, whatever fits
+        flat = len(e.candidates) > 1 + cfg.max_lookalikes
+        if e.ambiguous and (flat or q is None or sol is None or sol.fitting[q] != 1):
+            why.append(f"{e.ambiguous}; {len(e.candidates) - 1} look-alike turns in all" if flat else e.ambiguous)
         if e.fitness < cfg.min_fitness:
             why.append(f"little overlap (fitness {e.fitness:.2f} < {cfg.min_fitness})")
         target = (cum[e.j] - cum[e.i]) if not e.wraps else closing_turn
         if q is not None and sol is not None and not sol.inlier[q] and step_deg is None:
             why.append(f"the estimate {e.best:+.1f} deg contradicts the solved turns "
                        f"({sol.residual[q]:+.1f} deg off)")
+        elif sol is None and step_deg is None and not e.wraps and \
+                abs(e.best - turns[e.i]) > cfg.outlier_sigmas * cfg.pair_sigma_deg:
+            why.append(f"the estimate {e.best:+.1f} deg disagrees with the turn used ({turns[e.i]:+.1f} deg)")
         if step_deg is not None and target is not None:
             off = float(wrap(e.best - target))
             if abs(off) > sig_step:
@@ -335,7 +376,7 @@ def solve_turns(n: int, edges: list[Edge], closing: Edge | None, direction: str,
         if contradicted > cfg.max_contradicted * n_turns:
             reasons.append(f"{contradicted} of {n_turns} turn estimates contradict the solved turns")
     if step_deg is None:
-        amb = sum(1 for e in all_edges if e.j == (e.i + 1) % n and e.ambiguous and (closes or not e.wraps))
+        amb = sum(1 for p in unsure if "look-alike" in p["why"])
         if amb > cfg.max_ambiguous * max(1, n_turns):
             reasons.append(f"{amb} of {n_turns} turns have a look-alike turn: the object does not tell its turn "
                            "(symmetric or low texture)")
@@ -347,10 +388,6 @@ def solve_turns(n: int, edges: list[Edge], closing: Edge | None, direction: str,
         if abs(total - 360.0) > abs(step_deg) / 2:
             reasons.append(f"the last view overlaps the first, but {n} x {abs(step_deg):g} deg is {total:.0f} deg, "
                            "not a full turn: the given step or the frames are wrong")
-    if direction == "unknown" and len(costs) == 2 and closes:
-        a, b = sorted(costs.values())
-        if b - a < 1.0 and step_deg is not None:
-            reasons.append(f"the direction is not told by the turns (costs {costs})")
     if reasons:
         status = "unsure"
     total = float(sum(turns)) + (closing_turn or 0.0)

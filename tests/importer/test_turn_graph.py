@@ -86,21 +86,53 @@ def test_a_given_step_that_does_not_close_the_full_turn_it_claims_is_unsure():
     assert plan.status == "unsure" and "not a full turn" in " ".join(plan.loop.reasons)
 
 
-def test_a_symmetric_object_is_reported_unsure_with_the_reason():
-    """Every pair's sweep peaks as high half a turn away (a box with the same print on opposite sides)."""
+def test_a_look_alike_half_turn_is_resolved_by_the_loop():
+    """Every pair's sweep peaks as high half a turn away (a box with the same print front and back): the loop
+    rules the half turns out (they cannot add up to a full turn), so the sequence closes and no pair is unsure."""
     n, step = 10, 36.0
     neigh = [_search([step, step + 180.0], heights=[1.0, 1.0]) for _ in range(n - 1)]
     plan = plan_turns(neigh, None, "unknown", closing=_search([step, step + 180.0], heights=[1.0, 1.0]),
                       graph=TurnGraphConfig(reach=1))
+    assert plan.status == "closed", plan.loop.reasons
+    assert np.all(np.abs(np.diff(plan.cumulative_deg) - step) < 1e-6) and not plan.loop.unsure_pairs
+
+
+def _flat(turn: float, rng: np.random.Generator) -> TurnResult:
+    """A body of revolution: every yaw scores about the same (the search's best is wherever the noise is)."""
+    score = 0.8 + rng.uniform(-0.03, 0.03, len(GRID))
+    return TurnResult(T=np.eye(4), yaw_deg=-turn, shift=np.zeros(3), fitness=0.9, rmse=0.001, color_fitness=0.9,
+                      sweep=[(float(y), float(v)) for y, v in zip(GRID, score, strict=True)])
+
+
+def test_an_object_that_does_not_tell_its_turn_is_reported_unsure_with_the_reason():
+    """A body of revolution turned 12 x 30 degrees: its estimates are noise and every turn has look-alikes
+    all round. Whatever the loop makes of it, the sequence is unsure and each pair says why."""
+    rng = np.random.default_rng(3)
+    neigh = [_flat(float(rng.uniform(-10, 10)), rng) for _ in range(11)]
+    plan = plan_turns(neigh, None, "unknown", closing=_flat(float(rng.uniform(-10, 10)), rng))
     assert plan.status == "unsure"
     assert "look-alike" in " ".join(plan.loop.reasons)
-    assert all("look-alike" in p["why"] for p in plan.loop.unsure_pairs)
+    assert len(plan.loop.unsure_pairs) >= 6 and all("look-alike" in p["why"] for p in plan.loop.unsure_pairs)
 
 
 def test_a_partial_turn_is_open_not_forced_to_a_full_turn():
-    """Six views 15 degrees apart: the last view is 75 degrees from the first, which is no closing step."""
-    neigh = [_search(15.0) for _ in range(5)]
-    plan = plan_turns(neigh, None, "unknown", closing=_search(-75.0, fitness=0.5))
+    """Ten views 15 degrees apart: the last view is 135 degrees from the first, no closing step of a full
+    turn in ten (at most 1.5 x 36 degrees), even though the two still overlap a little."""
+    neigh = [_search(15.0) for _ in range(9)]
+    plan = plan_turns(neigh, None, "unknown", closing=_search(-135.0, fitness=0.35))
     assert not plan.loop.loop_closes and plan.status == "open"
-    assert plan.total_turn_deg == pytest.approx(75.0, abs=1e-6)
+    assert plan.total_turn_deg == pytest.approx(135.0, abs=1e-6)
     assert "partial turn" in plan.loop.closing["why"]
+
+
+def test_estimates_that_turn_both_ways_make_the_sequence_unsure_not_closed():
+    """Seven views ~57 degrees apart, a box whose faces look alike at that step: four of the six neighbour
+    estimates turn the other way (the pattern castard's every-3rd frames gave). The object is turned one way,
+    so those four cannot all be right; the loop still closes (the last view matches the first) but on too few
+    supported turns: unsure, each contradicted pair named, and no turn solved the wrong way."""
+    neigh = [_search(t) for t in [13.95, 30.53, -53.83, -52.39, 33.18, 38.61]]
+    plan = plan_turns(neigh, None, "unknown", closing=_search(-9.6, fitness=0.99))
+    assert plan.loop.loop_closes and plan.status == "unsure"
+    assert "supported" in " ".join(plan.loop.reasons)
+    assert {p["from"] for p in plan.loop.unsure_pairs} == {0, 1, 4, 5}
+    assert np.all(np.diff(plan.cumulative_deg) < 0)  # one way round
