@@ -60,6 +60,10 @@ class TurnGraphConfig:
     direction_margin: float = 2.0  # both directions' costs closer than this: the direction is not told
     backward_tolerance_deg: float = 5.0  # an estimate this far the other way is noise on a small turn, not wrong
     min_turn_deg: float = 0.5  # a turn solved the wrong way is held at this much the right way
+    # two neighbouring views overlap, so they are less than this apart: a solved turn beyond it is held at
+    # it (without it a robust solve may load a whole missing turn onto one pair)
+    max_turn_deg: float = 150.0
+    max_uneven: float = 3.0  # a solved turn above this x the median turn (+ 10 deg) is not a turn made by hand
     min_fitness: float = 0.25  # a pair fitting less than this overlaps too little to tell its turn
     min_supported: float = 0.5  # a closed loop needs this share of turns supported by their own best estimate
     max_contradicted: float = 1.0 / 3.0  # ... and at most this share contradicted by the solution
@@ -168,6 +172,7 @@ def solve_graph(n: int, edges: list[Edge], winding: int, cfg: TurnGraphConfig,
     elif winding:
         priors += [(k, k + 1, full / n, cfg.spread_sigma_deg) for k in range(m - 1)]
     pinned: set[int] = set()  # turns solved the wrong way: held at the smallest turn the right way
+    capped: set[int] = set()  # turns solved beyond max_turn_deg: held at it
     chosen = [e.best for e in used]
     for _ in range(cfg.iterations):
         ext = np.append(theta, full) if winding else theta
@@ -184,7 +189,9 @@ def solve_graph(n: int, edges: list[Edge], winding: int, cfg: TurnGraphConfig,
             chosen[q] = c
             r = (c - pred) / sig
             rows.append((a, b)), rhs.append(c), w.append(1.0 / (1.0 + (r / cfg.cauchy_sigmas) ** 2) / sig**2)
-        for a, b, turn, sig in priors + [(k, k + 1, sign * cfg.min_turn_deg, 0.5) for k in sorted(pinned)]:
+        held = [(k, k + 1, sign * cfg.min_turn_deg, 0.5) for k in sorted(pinned)]
+        held += [(k, k + 1, sign * cfg.max_turn_deg, 0.5) for k in sorted(capped)]
+        for a, b, turn, sig in priors + held:
             rows.append((a, b)), rhs.append(turn), w.append(1.0 / sig**2)
         A = np.zeros((len(rows), m))
         for r_, (a, b) in enumerate(rows):
@@ -198,8 +205,10 @@ def solve_graph(n: int, edges: list[Edge], winding: int, cfg: TurnGraphConfig,
         new = np.concatenate([[0.0], sol])
         turns = np.diff(np.append(new, full) if winding else new)
         wrong = {k for k, t in enumerate(turns) if sign and t * sign < cfg.min_turn_deg - 1e-6} - pinned
+        far = {k for k, t in enumerate(turns) if sign and t * sign > cfg.max_turn_deg + 1e-6} - capped
         pinned |= wrong
-        if not wrong and np.max(np.abs(new - theta)) < 1e-4:
+        capped |= far
+        if not wrong and not far and np.max(np.abs(new - theta)) < 1e-4:
             theta = new
             break
         theta = new
@@ -375,6 +384,12 @@ def solve_turns(n: int, edges: list[Edge], closing: Edge | None, direction: str,
                            "is closed by assumption, not by evidence")
         if contradicted > cfg.max_contradicted * n_turns:
             reasons.append(f"{contradicted} of {n_turns} turn estimates contradict the solved turns")
+        solved = np.abs(np.asarray(turns + [closing_turn or 0.0]))
+        limit = cfg.max_uneven * float(np.median(solved)) + 10.0
+        if solved.max() > limit:
+            k = int(np.argmax(solved))
+            reasons.append(f"the solved turns are uneven: {solved[k]:.0f} deg at pair {k} -> {(k + 1) % n} while "
+                           f"the median is {np.median(solved):.0f} deg (the loop's missing turn put on few pairs)")
     if step_deg is None:
         amb = sum(1 for p in unsure if "look-alike" in p["why"])
         if amb > cfg.max_ambiguous * max(1, n_turns):

@@ -36,7 +36,8 @@ def test_castard_imports_with_base_from_the_table_and_the_direction_found(tmp_pa
     sup = turns["direction_support"]
     assert sup["cw_score"] > sup["ccw_score"]
     session = read_session(out)
-    assert [v["commanded_turn_deg"] for v in session.views][:3] == [0.0, -38.0, -76.0]
+    # the step is a prior: each turn stays within its stated uncertainty (default 2 degrees) of it
+    assert np.allclose([v["commanded_turn_deg"] for v in session.views][:3], [0.0, -38.0, -76.0], atol=4.0 + 1e-6)
     f = read_scan(out, 3, 0)
     assert f.meta["pose_source"] == "table_plane"
     # base: z up along the table normal, the camera ~12 cm above the table top (z = 0)

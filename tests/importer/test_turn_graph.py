@@ -136,3 +136,13 @@ def test_estimates_that_turn_both_ways_make_the_sequence_unsure_not_closed():
     assert "supported" in " ".join(plan.loop.reasons)
     assert {p["from"] for p in plan.loop.unsure_pairs} == {0, 1, 4, 5}
     assert np.all(np.diff(plan.cumulative_deg) < 0)  # one way round
+
+
+def test_a_loop_whose_estimates_see_no_turn_is_unsure_not_loaded_onto_a_few_pairs():
+    """Twelve views whose every estimate says the object did not turn (a can with a colour band all round,
+    one clear peak at zero): the loop cannot be closed by putting the whole turn on one or two pairs."""
+    neigh = [_search(0.5) for _ in range(11)]
+    plan = plan_turns(neigh, None, "unknown", closing=_search(0.5))
+    turns = np.abs(np.diff(plan.cumulative_deg))
+    assert plan.status == "unsure", plan.loop.reasons
+    assert turns.max() <= 150.0 + 1e-6
