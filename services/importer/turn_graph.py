@@ -395,6 +395,10 @@ def solve_turns(n: int, edges: list[Edge], closing: Edge | None, direction: str,
         if amb > cfg.max_ambiguous * max(1, n_turns):
             reasons.append(f"{amb} of {n_turns} turns have a look-alike turn: the object does not tell its turn "
                            "(symmetric or low texture)")
+        if not closes and closing is not None and closing.fitness >= cfg.closing_min_fitness \
+                and abs(sum(turns)) <= cfg.closing_max_steps * 360.0 / n:
+            reasons.append(f"the last view overlaps the first and the turns add up to only {sum(turns):+.0f} deg: "
+                           "the object did not turn, or its turns cannot be seen (symmetric or low texture)")
         if not closes and unsure:
             reasons.append(f"{len(unsure)} turns are unsure and no loop checks them "
                            f"({closing_info.get('why', 'the loop does not close')})")
