@@ -57,6 +57,7 @@ class TurnGraphConfig:
     # more look-alikes than this (a sweep with no turn standing out: a body of revolution, no texture) cannot
     # be resolved by the loop; fewer (a box's 90/180-degree twins) are, when the solution admits only one
     max_lookalikes: int = 3
+    closing_tolerance_deg: float = 30.0  # the closing pair fits a full turn when this close to where it leaves it
     direction_margin: float = 2.0  # both directions' costs closer than this: the direction is not told
     backward_tolerance_deg: float = 5.0  # an estimate this far the other way is noise on a small turn, not wrong
     min_turn_deg: float = 0.5  # a turn solved the wrong way is held at this much the right way
@@ -304,23 +305,20 @@ def solve_turns(n: int, edges: list[Edge], closing: Edge | None, direction: str,
                 for s in signs}
         costs = {("ccw" if s > 0 else "cw"): round(x.cost, 3) for s, x in sols.items()}
 
-        def closing_fits(x: GraphSolution) -> bool:
-            q = [k for k, e in enumerate(x.edges) if e is closing][0]
-            return x.inlier[q]
-
-        # the closing pair must match where a full turn that way leaves it (a given step decides that turn
-        # itself: an estimate off the step is one more disagreeing pair)
-        fits = {s: x for s, x in sols.items() if step_deg is not None or closing_fits(x)}
-        if not fits:
-            best = min(sols.values(), key=lambda x: x.cost)
-            q = [k for k, e in enumerate(best.edges) if e is closing][0]
+        best = min(sols.values(), key=lambda x: x.cost)
+        q = [k for k, e in enumerate(best.edges) if e is closing][0]
+        # the closing pair must match about where the full turn leaves it; "about": a focal length a few
+        # percent off biases every pair the same way and opens an otherwise right loop by up to tens of degrees
+        # (the self-calibration's range), while a partial turn misses by most of a turn. A given step decides
+        # that turn itself (an estimate off the step is one more disagreeing pair)
+        if step_deg is None and abs(best.residual[q]) > cfg.closing_tolerance_deg:
             closes, closing_info = False, {**closing_info, "why": (
                 f"the last view matches the first at {closing.best:+.0f} deg, {best.residual[q]:+.0f} deg from "
                 "where a full turn puts it: a partial turn")}
         else:
-            sol = min(fits.values(), key=lambda x: x.cost)
-            if direction == "unknown" and len(fits) == 2:
-                a, b = sorted(x.cost for x in fits.values())
+            sol = best
+            if direction == "unknown" and len(sols) == 2:
+                a, b = sorted(x.cost for x in sols.values())
                 if b - a < cfg.direction_margin:
                     reasons.append(f"the turns do not tell the direction: a full turn either way fits them "
                                    f"about as well (costs {costs})")

@@ -128,14 +128,14 @@ def test_a_partial_turn_is_open_not_forced_to_a_full_turn():
 def test_estimates_that_turn_both_ways_make_the_sequence_unsure_not_closed():
     """Seven views ~57 degrees apart, a box whose faces look alike at that step: four of the six neighbour
     estimates turn the other way (the pattern castard's every-3rd frames gave). The object is turned one way,
-    so those four cannot all be right; the loop still closes (the last view matches the first) but on too few
-    supported turns: unsure, each contradicted pair named, and no turn solved the wrong way."""
+    so those cannot all be right; whichever way the loop is tried, too few turns support it: unsure, the pairs
+    that disagree named, and the turns used go one way round."""
     neigh = [_search(t) for t in [13.95, 30.53, -53.83, -52.39, 33.18, 38.61]]
     plan = plan_turns(neigh, None, "unknown", closing=_search(-9.6, fitness=0.99))
-    assert plan.loop.loop_closes and plan.status == "unsure"
-    assert "supported" in " ".join(plan.loop.reasons)
-    assert {p["from"] for p in plan.loop.unsure_pairs} == {0, 1, 4, 5}
-    assert np.all(np.diff(plan.cumulative_deg) < 0)  # one way round
+    assert plan.status == "unsure" and plan.loop.reasons
+    assert {2, 3} <= {p["from"] for p in plan.loop.unsure_pairs}
+    turns = np.diff(plan.cumulative_deg)
+    assert np.all(turns < 0) or np.all(turns > 0)  # one way round
 
 
 def test_a_loop_whose_estimates_see_no_turn_is_unsure_not_loaded_onto_a_few_pairs():
@@ -146,3 +146,16 @@ def test_a_loop_whose_estimates_see_no_turn_is_unsure_not_loaded_onto_a_few_pair
     turns = np.abs(np.diff(plan.cumulative_deg))
     assert plan.status == "unsure", plan.loop.reasons
     assert turns.max() <= 150.0 + 1e-6
+
+
+def test_a_full_turn_open_by_a_focal_length_bias_still_closes():
+    """Twenty views of a hand-turned box, every estimate a little short (a focal length 4.5 % off: the pattern
+    of castard's estimates, a loop open by ~9 degrees). The loop still closes as a full turn (the focal
+    self-calibration then removes the bias): closed, clockwise, every estimate supported."""
+    est = [-36.1, -24.3, -14.5, -21.1, -15.1, -17.4, -24.9, -18.0, -10.8, -17.1, -12.7, -22.5, -17.7, -15.4,
+           -18.0, -17.2, -21.6, -14.7, -18.7]  # sum -357.8
+    neigh = [_search(t) for t in est]
+    plan = plan_turns(neigh, None, "unknown", closing=_search(+7.0, fitness=0.95), graph=TurnGraphConfig(reach=1))
+    assert plan.loop.loop_closes and plan.status == "closed", plan.loop.reasons
+    assert plan.direction == "cw" and plan.total_turn_deg == pytest.approx(-360.0, abs=1e-6)
+    assert np.all(np.abs(np.diff(plan.cumulative_deg) - est) < 3.0)
