@@ -1,6 +1,6 @@
 """Twin acquisitions that really grasp, turn and place, made once and reused by the benchmarks.
 
-``bench dynamic``'s robot-turned rows (issue 15 item 5) must come from acquisitions in which the twin's arm
+``bench dynamic``'s robot-turned rows must come from acquisitions in which the twin's arm
 grasped the object, turned it and set it down under MuJoCo contact physics, not from turns a profile draws.
 Such an acquisition takes minutes, so it is run once per (object, profile, seed) as the user would run it,
 ``objscan scan --object NAME --physics mujoco --profile robot-turned --views 12 --seed S --out DIR``, in a

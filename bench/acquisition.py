@@ -1,7 +1,7 @@
 """``objscan bench acquisition``: a whole simulated acquisition through every service, timed and scored.
 
 Runs the main job (``objscan scan``) on the twin: 12 views of a HOPE object (``quick``: 4 views) under the
-``realistic`` profile (the benchmarks' default twin, issue 15; ``$OBJSCAN_BENCH_PROFILE`` names another, e.g.
+``realistic`` profile (the benchmarks' default twin; ``$OBJSCAN_BENCH_PROFILE`` names another, e.g.
 ``robot-turned`` as measured before), and reports the time, the grasp attempts and re-scans it took, and the model's
 accuracy against the ground-truth mesh (Chamfer, one-sided accuracy and completeness, F-score).
 

@@ -35,7 +35,7 @@ Which path made each row (``path`` in the JSON, ``ROW_PATHS``; ``label`` says it
 - ``fast``: the default static profile, then the fast pair registration (``DynamicConfig()``) in one
   configuration with the paper's chain (no_region ... region_crop), the pose-graph combination
   (``pose_graph``) or the automatic choice (``auto``, what ``objscan reconstruct`` runs).
-- ``paper`` (issue 15 item 5, ``paper:<configuration>``): the same frames through the paper's own static
+- ``paper`` (``paper:<configuration>``): the same frames through the paper's own static
   profile (``StaticConfig.paper()``) and the paper's pair registration (``DynamicConfig.paper``: 5 attempts,
   4PCS at 0.9 / 0.85 / 0.8, colour ICP + GICP, the failure rule). To make them affordable without changing
   what they compute, the views' paper static registrations run one view per process and the pairs one per
@@ -52,7 +52,7 @@ path costs seconds to tens of seconds per pair), ``$OBJSCAN_BENCH_OBJECTS`` and 
 (comma-separated) the objects and profiles (a partial run says so in its ``objects`` and ``profiles``);
 ``$OBJSCAN_BENCH_ROW_LOG`` appends each row as JSON lines as soon as it is measured.
 
-Recorded sessions (issue 16): with ``$OBJSCAN_BENCH_SESSIONS`` (comma-separated session folders of
+Recorded sessions: with ``$OBJSCAN_BENCH_SESSIONS`` (comma-separated session folders of
 ``objscan scan``) only those sessions are measured (``physics_sessions``), rows as in ``--quick``.
 """
 
@@ -66,7 +66,7 @@ import numpy as np
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 ROWS = ("no_region", "no_region_crop", "region", "region_crop", "pose_graph", "auto", "oracle")
-# Paper-faithful rows (issue 15 item 5): the paper's own static profile (``StaticConfig.paper()``: FPFH
+# Paper-faithful rows: the paper's own static profile (``StaticConfig.paper()``: FPFH
 # RANSAC, table removal, multi-scale colour ICP + GICP, overlap-only point-to-plane, pose graph) on the same
 # frames, then the paper's pair registration (``DynamicConfig.paper``: 5 attempts, 4PCS at overlaps 0.9 /
 # 0.85 / 0.8, multi-scale colour ICP + GICP, the failure rule, drop-lowest-fitness chain) in one

@@ -1,4 +1,4 @@
-"""Per-edge yaw error of the dynamic stage's pair registration against the twin's truth (issue 15 item 3).
+"""Per-edge yaw error of the dynamic stage's pair registration against the twin's truth.
 
 Why: on textured cylinders (alphabet_soup, tomato_sauce) the loop of 12 pair transforms does not close
 (14-17 deg), so the automatic choice runs all four configurations. This measures where that comes from,

@@ -1,4 +1,4 @@
-"""Atomic file writes: the one helper every writer of durable files uses (issue 17 #11).
+"""Atomic file writes: the one helper every writer of durable files uses.
 
 A reader (or a process restarted after a crash or a power cut) sees the old file or the new one, never
 half of one, and a written file survives a power cut once the call returns:

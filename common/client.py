@@ -22,6 +22,7 @@ from common.errors import RemoteError, RequestTimeout, ServiceUnavailable, WireE
 from common.messages import Error
 
 DEFAULT_TIMEOUT_S = 30.0
+ZENOH_QUERY_TIMEOUT = b"Timeout"  # the error reply zenoh gives a query whose matched queryable answered too late
 
 
 def _new_request_id() -> str:
@@ -34,6 +35,9 @@ def _interpret(key: str, replies: list[tuple[bool, bytes]], elapsed: float, time
             raise RequestTimeout(f"no reply from {key} within {timeout:.1f} s", detail={"key": key})
         raise ServiceUnavailable(f"no service answers {key}", detail={"key": key})
     ok, payload = replies[0]
+    if not ok and payload == ZENOH_QUERY_TIMEOUT:  # a service matched the key but answered too late
+        raise RequestTimeout(f"{key} matched a service that did not answer within {timeout:.1f} s",
+                             detail={"key": key})
     if not ok:
         try:
             msg = decode(payload)

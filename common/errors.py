@@ -69,3 +69,11 @@ class InvalidRequest(ObjscanError):
     """The request decoded fine but asks for something the service cannot do (e.g. empty cloud)."""
 
     code = "invalid_request"
+
+
+class ServiceStartError(ObjscanError):
+    """A service process ended before it was live. ``code`` is the service's own (``object_not_found`` when the
+    twin could not load its object) when it said why (``common/fatal.py``), else ``service_exited``;
+    ``detail`` names the ``service`` and its ``log``."""
+
+    code = "service_exited"

@@ -76,7 +76,8 @@ def _apply(M: np.ndarray, t: np.ndarray | None, arr: np.ndarray) -> np.ndarray:
 
     Why not the matmul: an (N, 3) x (3, 3) product goes to BLAS, which handles the thin shape badly and
     spins its threads: 90 ms CPU (470 ms wall on the shared box) for 300k points against 4 ms this way, and
-    a static view transforms ~1M points (issue 15 wall time). Same values to the last bit or one ulp.
+    a static view transforms ~1M points, which dominated ``reconstruct``'s wall
+    time. Same values to the last bit or one ulp.
     """
     p = arr.astype(np.float64, copy=False)
     out = np.empty(p.shape, dtype=np.float64)
@@ -110,9 +111,10 @@ def quat_xyzw_to_matrix(q: np.ndarray) -> np.ndarray:
 
 
 def matrix_to_quat_xyzw(R: np.ndarray) -> np.ndarray:
-    """Quaternion (x, y, z, w) with w >= 0, so equal rotations compare equal."""
+    """Quaternion (x, y, z, w) with w >= 0, so equal rotations compare equal. A stack (N, 3, 3) gives (N, 4)
+    in one call (tens of thousands of poses: a recording's joint states)."""
     q = Rotation.from_matrix(np.asarray(R, dtype=float)).as_quat()
-    return -q if q[3] < 0 else q
+    return np.where(q[..., 3:4] < 0, -q, q)
 
 
 def pose_to_matrix(position: np.ndarray, quat_xyzw: np.ndarray) -> np.ndarray:

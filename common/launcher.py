@@ -1,16 +1,19 @@
 """Start service processes wired to one Zenoh network, wait until they are live, stop them cleanly.
 
 Used by ``objscan up``/``objscan scan`` (the embedded default: a router on loopback and every service its
-own OS process) and by tests, which get the same processes on a free port with multicast off.
+own OS process) and by tests, which get the same processes on a free port with multicast off. A process
+that ends before it is live raises ``ServiceStartError`` with the error it wrote (``common/fatal.py``).
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -20,6 +23,8 @@ import zenoh  # noqa: F401 - type of ServiceGroup.session
 
 from common import keys
 from common.client import live_services
+from common.errors import ServiceStartError
+from common.fatal import FATAL_FILE_ENV, read_fatal, start_error
 from common.zenoh_config import ZenohSettings, free_tcp_port, open_session
 
 
@@ -56,6 +61,7 @@ class ServiceGroup:
         self._start_router = start_router
         self._session: zenoh.Session | None = None
         self.cleanups: list[Callable[[], object]] = []  # run by stop_all, after the processes (e.g. a lock)
+        self._fatal_dir: Path | None = None  # each process's fatal-error file (common/fatal.py), made on first use
 
     # ---------------------------------------------------------------------------------------------
     def env(self, extra: dict[str, str] | None = None) -> dict[str, str]:
@@ -77,10 +83,31 @@ class ServiceGroup:
             self.log_dir.mkdir(parents=True, exist_ok=True)
             out = open(self.log_dir / f"{label}.log", "ab")  # noqa: SIM115 - closed in stop_all
             self._logs.append(out)
-        proc = subprocess.Popen([sys.executable, "-m", spec.module, *spec.args], env=self.env(spec.env),
+        fatal = self.fatal_path(label)
+        fatal.unlink(missing_ok=True)  # an earlier run's reason is not this one's
+        env = self.env({FATAL_FILE_ENV: str(fatal), **spec.env})
+        proc = subprocess.Popen([sys.executable, "-m", spec.module, *spec.args], env=env,
                                 stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
         self.procs[label] = proc
         return proc
+
+    def fatal_path(self, label: str) -> Path:
+        """Where process ``label`` writes the error that ended it (``common/fatal.py``)."""
+        if self._fatal_dir is None:
+            self._fatal_dir = Path(tempfile.mkdtemp(prefix="objscan-fatal-"))
+            self.cleanups.append(self._drop_fatal_dir)
+        return self._fatal_dir / f"{label}.json"
+
+    def _drop_fatal_dir(self) -> None:
+        if self._fatal_dir is not None:
+            shutil.rmtree(self._fatal_dir, ignore_errors=True)
+            self._fatal_dir = None
+
+    def start_error(self, label: str, *, starting: bool = True) -> ServiceStartError:
+        """Why process ``label`` ended (while starting, by default): its own typed error when it wrote one."""
+        proc = self.procs[label]
+        log = self.log_dir / f"{label}.log" if self.log_dir else None
+        return start_error(label, proc.poll(), read_fatal(self.fatal_path(label)), log, starting=starting)
 
     def start_router(self) -> None:
         self.start(ProcessSpec("common.router", ["--listen", self.endpoint], name="router"))
@@ -95,8 +122,7 @@ class ServiceGroup:
                 if s.connect_ex(("127.0.0.1", self.port)) == 0:
                     return
             if self.procs[label].poll() is not None:
-                raise RuntimeError(f"{label} exited at start-up (port in use?)"
-                                   + (f"; see {self.log_dir / (label + '.log')}" if self.log_dir else ""))
+                raise self.start_error(label)
             time.sleep(0.05)
         raise TimeoutError(f"{label} did not listen on port {self.port}")
 
@@ -116,10 +142,10 @@ class ServiceGroup:
                 return
             for label, proc in self.procs.items():
                 if proc.poll() is not None and label != "router":
-                    raise RuntimeError(f"{label} exited with code {proc.returncode} before it was live"
-                                       + (f"; see {self.log_dir / (label + '.log')}" if self.log_dir else ""))
+                    raise self.start_error(label)
             time.sleep(0.1)
-        raise TimeoutError(f"services not live after {timeout:.0f}s: {sorted(wanted - live)}")
+        raise ServiceStartError(f"services not live after {timeout:.0f} s: {', '.join(sorted(wanted - live))}",
+                                code="start_timeout", detail={"services": sorted(wanted - live)})
 
     def launch(self, specs: Sequence[ProcessSpec], timeout: float = 90.0) -> None:
         if self._start_router and "router" not in self.procs:

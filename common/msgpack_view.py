@@ -40,7 +40,7 @@ def unpack_view(payload: bytes | bytearray | memoryview, max_elements: int = MAX
 
     ``max_elements`` bounds the work: every container's declared length is charged to the budget *before*
     its elements are read, so a payload of millions of tiny arrays is refused after at most
-    ``max_elements`` items of parsing (a 5 MB one took seconds of pure-Python work before; issue 17 #9).
+    ``max_elements`` items of parsing (unbounded, a 5 MB one costs seconds of pure-Python work).
     """
     view = memoryview(payload).cast("B") if not isinstance(payload, memoryview) else payload.cast("B")
     try:

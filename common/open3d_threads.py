@@ -4,8 +4,8 @@ Open3D 0.20 runs its parallel loops on oneAPI TBB, not OpenMP: ``OMP_NUM_THREADS
 with more than one thread its reductions (the RGB-D odometry's normal equations, ICP's) add partial sums in
 whatever order the threads finish. Measured on this project's scans: the same three frames registered
 three times in one process with ``OMP_NUM_THREADS=1`` gave three scan poses differing in the last bits; a
-physics session amplified such bits into a different grasp and a different set-down (issue 16,
-"deterministic for a seed"). One thread makes every call reproducible.
+physics session amplified such bits into a different grasp and a different set-down, and a session must be
+deterministic for a seed. One thread makes every call reproducible.
 
 The knob stays the project's one thread setting, ``OMP_NUM_THREADS`` (the launcher sets 1 for every service
 process; docker-compose gives registration 2): its value is applied to Open3D too. More than one thread is

@@ -1,7 +1,7 @@
 """Paths that arrive over the network, confined to the folders a service was configured with.
 
-The orchestrator's ``run`` request names folders (``out``, ``resume``, ``library``); before issue 17 #3 any
-path was taken as given, so a request could make the orchestrator create, write or tidy folders anywhere
+The orchestrator's ``run`` request names folders (``out``, ``resume``, ``library``); a path taken as given
+would let a request make the orchestrator create, write or tidy folders anywhere
 the process may write. ``confine`` resolves a requested path (symlinks and ``..`` included) and refuses
 it unless it lies inside the configured root: a typed ``PathNotAllowed`` (code ``path_not_allowed``),
 checked before anything is created.

@@ -10,7 +10,7 @@ with plain ``async def`` handlers, and calls ``run_service(MyService)`` from its
   ``Error`` reply and the service keeps running;
 - bounds the requests in progress (``max_concurrent``): beyond it a request is answered ``overloaded`` at
   once, undecoded; ``priority`` keys (health, every ``stop``) are never refused, so an e-stop always answers
-  while hostile payloads arrive (issue 17 #9, ``objscan bench estop``); ``inline`` keys (the arm's ``stop``,
+  while hostile payloads arrive (``objscan bench estop``); ``inline`` keys (the arm's ``stop``,
   health) run a plain function the moment the loop reaches their query, ahead of handlers queued before it;
 - answers ``objscan/{service}/{instance}/health`` and holds the liveliness token
   ``objscan/@alive/{service}/{instance}`` for as long as it lives;
@@ -41,6 +41,7 @@ from common import keys
 from common.client import DEFAULT_TIMEOUT_S, request
 from common.codec import MAX_PAYLOAD_BYTES, Message, decode
 from common.errors import ObjscanError, WireError
+from common.fatal import write_fatal
 from common.log import event, request_id, setup_logging
 from common.memory import tune_malloc
 from common.messages import Error, Health
@@ -204,6 +205,10 @@ class Service:
     def health_info(self) -> dict[str, Any]:
         """Extra figures for the health reply (backend, queue depth, ...)."""
         return {}
+
+    def zenoh_config(self) -> zenoh.Config:
+        """The Zenoh configuration the session opens with; a service that needs more (timestamps) adds it."""
+        return self.settings.zenoh.to_zenoh()
 
     def queryable(self, key: str, handler: Handler | InlineHandler, *, complete: bool = True,
                   budget: Budget = DEFAULT_BUDGET, priority: bool = False, inline: bool = False) -> None:
@@ -377,7 +382,7 @@ class Service:
     async def run(self) -> None:
         """Open the session, serve until stopped, then shut down cleanly."""
         self.loop = asyncio.get_running_loop()
-        self.session = zenoh.open(self.settings.zenoh.to_zenoh())
+        self.session = zenoh.open(self.zenoh_config())
         if self.settings.zenoh.connect and not await asyncio.to_thread(wait_connected, self.session, 10.0):
             event(log, "no zenoh link yet; serving anyway, peers may join later", logging.WARNING,
                   connect=",".join(self.settings.zenoh.connect))
@@ -445,7 +450,10 @@ def settings_from_args(args: argparse.Namespace, **options: Any) -> ServiceSetti
 
 
 def run_service(factory: Callable[[], Service]) -> None:
-    """Run a service until SIGINT/SIGTERM; exits non-zero if it failed to start."""
+    """Run a service until SIGINT/SIGTERM; exits non-zero if it failed to start.
+
+    The error that ends the process is logged as one structured line and written where its starter reads it
+    (``$OBJSCAN_FATAL_FILE``, ``common/fatal.py``), typed: the starter reports the service's own code."""
     tune_malloc()
     service = factory()
     limit_open3d_threads(only_if_imported=True)  # after the service's imports: reproducible registrations
@@ -457,4 +465,12 @@ def run_service(factory: Callable[[], Service]) -> None:
             loop.add_signal_handler(sig, service.stop)
         await service.run()
 
-    asyncio.run(main())
+    try:
+        asyncio.run(main())
+    except Exception as exc:
+        # the starter reads why (common/fatal.py): "sim could not start: unknown object ..." in its one line
+        payload = write_fatal(service.name, exc)
+        code = exc.code if isinstance(exc, ObjscanError) else "internal"
+        event(log, "fatal", logging.ERROR, code=code, message=str(getattr(exc, "message", exc))[:300],
+              written=payload or "-")
+        raise

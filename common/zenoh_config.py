@@ -129,7 +129,7 @@ class ZenohSettings:
 # ------------------------------------------------------------------------------------------------- TLS
 @dataclass
 class TlsSettings:
-    """Mutual TLS for ``tls/...`` endpoints (written for issue 10; see docs/security.md).
+    """Mutual TLS for ``tls/...`` endpoints (see docs/security.md).
 
     ``ca`` alone: the process checks the router's certificate but shows none itself (a router with
     ``enable_mtls`` refuses it). ``ca`` + ``cert`` + ``key``: mutual authentication; the certificate's

@@ -39,7 +39,8 @@ from typing import Any
 
 from common import keys
 from common.client import request_sync
-from common.errors import ObjscanError
+from common.errors import ObjscanError, ServiceStartError
+from common.fatal import fatal_payload
 from common.launcher import ProcessSpec, ServiceGroup
 from common.messages import Ok
 from common.zenoh_config import ZenohSettings, open_session
@@ -221,7 +222,8 @@ class PrivateCell:
 def start_cell(port: int, lock_fd: int, specs: list[ProcessSpec], log_dir: Path, *, grace_s: float,
                robot: str = keys.DEFAULT_ROBOT) -> PrivateCell:
     """Start a keeper for a new cell on ``port`` (its owner lock ``lock_fd`` is handed over to it) and wait
-    until every service is live. Raises ``RuntimeError`` naming the keeper's log when the cell cannot start."""
+    until every service is live. Raises ``ServiceStartError`` when the cell cannot start: the dying service's own
+    typed error (``common/fatal.py``) when it said why, else one naming the keeper's log."""
     log_dir = Path(log_dir)
     log_dir.mkdir(parents=True, exist_ok=True)
     record_path(port).unlink(missing_ok=True)
@@ -249,10 +251,27 @@ def start_cell(port: int, lock_fd: int, specs: list[ProcessSpec], log_dir: Path,
             break
         time.sleep(0.1)
     if rec.get("state") in (None, "starting", "failed") or keeper.poll() is not None:
-        why = rec.get("error") or "it did not start"
         cell.stop_all()
-        raise RuntimeError(f"the cell on port {port} did not start: {why}; see {log_dir / 'keeper.log'}")
+        raise cell_start_error(port, rec.get("error"), log_dir / "keeper.log")
     return cell
+
+
+def error_record(exc: BaseException) -> dict[str, Any]:
+    """How the keeper records why its cell did not start: the typed error (a service's own, when one died
+    starting: ``object_not_found`` ...), so the CLI reports that code, not the keeper's exception type."""
+    if isinstance(exc, ObjscanError):
+        return {"code": exc.code, "message": exc.message, "detail": fatal_payload("keeper", exc)["detail"]}
+    return {"code": "internal", "message": f"{type(exc).__name__}: {exc}", "detail": {}}
+
+
+def cell_start_error(port: int, error: Any, keeper_log: Path) -> ServiceStartError:
+    """The error ``start_cell`` raises: the one the keeper recorded (its code kept), else "did not start"."""
+    if isinstance(error, dict) and isinstance(error.get("code"), str):
+        return ServiceStartError(str(error.get("message") or "the cell did not start"), code=error["code"],
+                                 detail={**(error.get("detail") or {}), "port": port, "keeper_log": str(keeper_log)})
+    why = f": {error}" if error else ""
+    return ServiceStartError(f"the cell on port {port} did not start{why}; see {keeper_log}",
+                             code="cell_not_started", detail={"port": port, "keeper_log": str(keeper_log)})
 
 
 def stop_cell(port: int, *, keeper: subprocess.Popen[bytes] | None = None, timeout_s: float = 60.0
@@ -323,8 +342,8 @@ class Keeper:
         self._write()
         try:
             self.group.launch(self.specs, timeout=START_TIMEOUT_S)
-        except Exception as exc:  # noqa: BLE001 - said in the record, for the CLI waiting on it
-            self._write(state="failed", error=f"{type(exc).__name__}: {exc}")
+        except Exception as exc:  # noqa: BLE001 - said in the record, typed, for the CLI waiting on it
+            self._write(state="failed", error=error_record(exc))
             self.group.stop_all()
             return 1
         self._write(state="idle", processes={label: p.pid for label, p in self.group.procs.items()})

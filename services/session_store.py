@@ -9,8 +9,9 @@ keeps:
 - ``view_KK/grasps.json``: the plan and what was tried;
 - ``model.ply`` and ``report.json`` at the end;
 - ``.reserve``: 1 MB of disk set aside when the session is created; on a full disk it is released so the
-  journal can still record the failure and its reason (issue 17 #11);
-- ``.session.lock``: held (``fcntl.flock``) by the one orchestrator working on the session (issue 17 #8).
+  journal can still record the failure and its reason;
+- ``.session.lock``: held (``fcntl.flock``) by the one orchestrator working on the session, so two
+  never write one folder.
 
 ``SessionStore.create`` makes a new session only in an absent or empty folder, ``SessionStore.open``
 only opens a folder that holds a journal: a session never adopts (and a re-scan never moves things in) a

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
 
 import pytest
@@ -32,3 +33,14 @@ def service_group(tmp_path):
         yield group
     finally:
         group.stop_all()
+
+
+DEADLINE_ENV = "OBJSCAN_TEST_DEADLINE"  # seconds since the epoch after which no further test starts
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """A run with a wall-clock budget (CI's slow cases) skips, and names, the tests that would start after it:
+    a run that stops on time reports what it left out instead of being killed with nothing reported."""
+    deadline = os.environ.get(DEADLINE_ENV)
+    if deadline and float(deadline) < time.time():
+        pytest.skip(f"the run's time budget ({DEADLINE_ENV}) is spent")

@@ -11,7 +11,7 @@ whose top is the plane z = 0 of ``base``) and an optional box around the object.
 
 A colliding configuration or motion is refused with ``CollisionError`` naming the two bodies.
 
-Thread safety (issue 17 #10): the arm service checks motions in executor threads while ``arm/scene`` may
+Thread safety: the arm service checks motions in executor threads while ``arm/scene`` may
 change the object box. Pinocchio's geometry model and data are not safe to mutate during a check (a box
 changed mid-check corrupted the heap and killed the arm process), so one lock covers every scene change
 and every query, and a trajectory is checked against one scene from its first sample to its last.

@@ -16,6 +16,7 @@ import numpy as np
 from services.arm.errors import BadCommand, EnvelopeError
 from services.arm.kinematics import Kinematics, check_transform
 from services.arm.motion import NDOF, JointTrajectory, MotionLimits
+from services.arm.workspace import WORKSPACE_MAX, WORKSPACE_MIN
 
 
 @dataclass
@@ -29,8 +30,8 @@ class SafetyConfig:
     joint_margin: float = 0.01  # rad kept free inside each URDF joint limit
     max_velocity: np.ndarray = field(default_factory=lambda: np.full(NDOF, 1.5))
     max_acceleration: np.ndarray = field(default_factory=lambda: np.full(NDOF, 4.0))
-    workspace_min: tuple[float, float, float] = (-0.35, -0.6, 0.0)
-    workspace_max: tuple[float, float, float] = (0.85, 0.6, 0.9)
+    workspace_min: tuple[float, float, float] = WORKSPACE_MIN
+    workspace_max: tuple[float, float, float] = WORKSPACE_MAX
     min_tcp_height: float = 0.01
     max_gripper_force: float = 80.0  # N
     max_gripper_opening: float = 0.106  # m, RH-P12-RN stroke (rev 1)

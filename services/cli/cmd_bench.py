@@ -11,6 +11,7 @@ from pathlib import Path
 import bench
 from bench.report import print_figures
 from common.atomic import atomic_write_bytes
+from services.cli.outcome import BadUsage
 
 
 def available() -> list[str]:
@@ -22,8 +23,9 @@ def register(sub) -> None:  # noqa: ANN001
     p = sub.add_parser("bench", help="run a benchmark and print its figures",
                        description=f"Benchmarks: {', '.join(available())}. Figures are measured against "
                                    "baselines in the same run; see BENCHMARKS.md.")
-    p.add_argument("name", choices=available())
-    p.add_argument("--json", help="write the figures as one JSON object to this path")
+    p.add_argument("name", choices=available(), help="the benchmark to run (one of the list above)")
+    p.add_argument("--json", metavar="PATH",
+                   help="write the figures as one JSON object to this file (the table still goes to stdout)")
     p.add_argument("--quick", action="store_true", help="a smaller run for a fast check")
     p.add_argument("--set", dest="object_set", choices=["harsh", "realistic", "all"], default=None,
                    help="reconstruct: which object set (harsh primitives, realistic HOPE objects; default all)")
@@ -40,7 +42,7 @@ def _arm_options(module, args) -> dict:  # noqa: ANN001
     accepted = inspect.signature(module.run).parameters
     refused = [k for k in wanted if k not in accepted]
     if refused:
-        raise SystemExit(f"objscan bench {args.name} takes no {', '.join('--' + k.replace('_', '-') for k in refused)}")
+        raise BadUsage(f"{args.name} takes no {', '.join('--' + k.replace('_', '-') for k in refused)}")
     return wanted
 
 
@@ -49,8 +51,7 @@ def run(args) -> int:  # noqa: ANN001
     kwargs = {"quick": args.quick, **_arm_options(module, args)}
     if getattr(args, "object_set", None):
         if "object_set" not in inspect.signature(module.run).parameters:
-            print(f"objscan bench {args.name} has no object sets (--set is for reconstruct)")
-            return 2
+            raise BadUsage(f"{args.name} has no object sets (--set is for reconstruct)")
         kwargs["object_set"] = args.object_set
     figures = module.run(**kwargs)
     print_figures(args.name, figures)

@@ -21,9 +21,11 @@ from common.messages import Request
 from common.session_folder import atomic_write_json
 from common.zenoh_config import DEFAULT_ROUTER_PORT
 from services.calibration.procedure import ProcedureConfig, run_procedure
+from services.calibration.ros_files import write_ros_files
 from services.cell import hardware_services
 from services.cli.cells import add_network_args, remote_session
 from services.cli.cmd_scan import console, ensure_cell
+from services.cli.outcome import BadUsage
 
 
 def register(sub) -> None:  # noqa: ANN001
@@ -42,7 +44,8 @@ def register(sub) -> None:  # noqa: ANN001
     h.add_argument("--out", default="calibration/hand_eye.json", help="calibration file (default: %(default)s)")
     h.add_argument("--json", metavar="F", help="write the figures (errors against truth, residuals) to F")
     h.add_argument("--port", type=int, default=DEFAULT_ROUTER_PORT, help="router port of a local cell")
-    h.add_argument("--robot", default=keys.DEFAULT_ROBOT)
+    h.add_argument("--robot", default=keys.DEFAULT_ROBOT,
+                   help="robot cell id in the services' keys (default: %(default)s)")
     add_network_args(h)
     h.set_defaults(func=run)
 
@@ -51,16 +54,11 @@ def run(args) -> int:  # noqa: ANN001
     try:
         cfg = ProcedureConfig(views=args.views, board_xy=tuple(args.board_xy), seed=args.seed)
     except ValueError as exc:
-        console.print(f"[red]bad arguments:[/red] {exc}")
-        return 2
+        raise BadUsage(str(exc)) from None
     out = Path(args.out)
     t0 = time.time()
     if args.connect:
-        try:
-            session = remote_session(args.connect, hardware_services(args.backend))
-        except ObjscanError as exc:
-            console.print(f"[red]{exc.message}[/red]")
-            return 1
+        session = remote_session(args.connect, hardware_services(args.backend))
         try:
             return _calibrate(session, args, cfg, out, t0)
         finally:
@@ -78,18 +76,20 @@ def _calibrate(session, args, cfg: ProcedureConfig, out: Path, t0: float) -> int
     console.print(f"calibrating hand-eye over {cfg.views} views of the board at {cfg.board_xy}")
     try:
         res = run_procedure(session, args.robot, cfg)
-    except ObjscanError as exc:
-        console.print(f"[red]calibration failed[/red] [{exc.code}] {exc.message}")
+    except ObjscanError as exc:  # the figures file says so too; the CLI's one line says why
         if args.json:
             atomic_write_json(Path(args.json), {"ok": False, "error": {"code": exc.code, "message": exc.message}})
-        return 1
+        raise ObjscanError(f"calibration failed: {exc.message}", code=exc.code, detail=exc.detail) from exc
     finally:
         try:
             request_sync(session, keys.arm(args.robot, "move"), MoveRequest(kind="home", speed_scale=0.6), timeout=120)
         except ObjscanError as exc:  # parking is a courtesy: the calibration stands either way
             console.print(f"[yellow]could not move the arm home: {exc.code}[/yellow]")
     res.calibration.save(out)
-    f = {"ok": True, "file": str(out.resolve()), **res.figures, "seconds_total": round(time.time() - t0, 1)}
+    urdf, tf_static = write_ros_files(res.calibration.T_gripper_camera, out,
+                                      note=f"{res.figures.get('seed_method', '')}, {time.strftime('%Y-%m-%d')}")
+    f = {"ok": True, "file": str(out.resolve()), **res.figures, "seconds_total": round(time.time() - t0, 1),
+         "urdf_joint": str(urdf.resolve()), "tf_static": str(tf_static.resolve())}
     f["T_gripper_camera"] = res.calibration.T_gripper_camera.tolist()
     f["correction"] = res.calibration.correction.tolist()
     if args.json:
@@ -102,5 +102,6 @@ def _calibrate(session, args, cfg: ProcedureConfig, out: Path, t0: float) -> int
                       f"{f['rotation_error_deg']:.4f} deg[/bold] (uncalibrated: {f['nominal_translation_error_mm']:.2f}"
                       f" mm / {f['nominal_rotation_error_deg']:.3f} deg)")
     console.print(f"wrote {out} (load it with: camera service --hand-eye {out}, or OBJSCAN_HAND_EYE={out})")
+    console.print(f"for ROS 2: {urdf} (URDF joint gripper -> camera) and {tf_static} (static transform)")
     print(json.dumps({k: f[k] for k in ("translation_error_mm", "rotation_error_deg", "views_used", "file")}))
     return 0

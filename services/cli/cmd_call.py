@@ -12,6 +12,7 @@ from common.errors import ObjscanError
 from common.messages import Request
 from common.zenoh_config import open_session
 from services.cli.cells import add_network_args, network_settings
+from services.cli.outcome import BadUsage
 
 
 def register(sub) -> None:  # noqa: ANN001
@@ -20,7 +21,10 @@ def register(sub) -> None:  # noqa: ANN001
                                    "other JSON is sent as Request(params=JSON).")
     p.add_argument("key", help="zenoh key, e.g. objscan/robot0/arm/state")
     p.add_argument("json", nargs="?", help="request body as JSON")
-    p.add_argument("--timeout", type=float, default=30.0)
+    p.add_argument("--timeout", type=float, default=30.0,
+                   help="seconds to wait for the reply (default: %(default)s)")
+    p.add_argument("--json", dest="json_output", action="store_true",
+                   help="a failure is also one JSON object on stdout (the reply is always printed as JSON)")
     add_network_args(p)
     p.set_defaults(func=run)
 
@@ -28,11 +32,14 @@ def register(sub) -> None:  # noqa: ANN001
 def message_from_json(text: str | None) -> Message | None:
     if not text:
         return None
-    data = json.loads(text)
+    try:
+        data = json.loads(text)
+    except ValueError as exc:
+        raise BadUsage(f"the request body is not JSON: {exc}") from None
     if isinstance(data, dict) and "type" in data:
         cls = registered_types().get(data.pop("type"))
         if cls is None:
-            raise SystemExit(f"unknown message type; known: {', '.join(sorted(registered_types()))}")
+            raise BadUsage(f"unknown message type; known: {', '.join(sorted(registered_types()))}")
         import dataclasses
         import typing
 
@@ -69,11 +76,10 @@ def run(args) -> int:  # noqa: ANN001
     session = open_session(network_settings(args.connect))
     try:
         reply = request_sync(session, args.key, msg, timeout=args.timeout)
-        print(json.dumps(summarize(reply), indent=2, default=str))
-        return 0
-    except ObjscanError as exc:
-        print(json.dumps({"error": exc.code, "message": exc.message, "detail": summarize(exc.detail)},
-                         indent=2, default=str))
-        return 1
+    except ObjscanError as exc:  # the service's own code and message, on the CLI's one line
+        exc.detail = summarize(exc.detail)
+        raise
     finally:
         session.close()
+    print(json.dumps(summarize(reply), indent=2, default=str))
+    return 0

@@ -19,7 +19,6 @@ from PIL import Image
 from common import keys
 from common.api import CaptureRequest, MoveRequest
 from common.client import request_sync
-from common.errors import ObjscanError
 from common.messages import Request
 from common.session_folder import atomic_write_bytes, atomic_write_json
 from common.zenoh_config import DEFAULT_ROUTER_PORT
@@ -28,8 +27,10 @@ from services.camera.registry import backend_option
 from services.cell import CELLS, hardware_services
 from services.cli.cells import add_network_args, remote_session
 from services.cli.cmd_scan import console, ensure_cell
+from services.cli.outcome import require_path
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.planning import look_pose
+from services.sim.demo_objects import DEFAULT_OBJECT
 
 
 def register(sub) -> None:  # noqa: ANN001
@@ -38,17 +39,21 @@ def register(sub) -> None:  # noqa: ANN001
                                    "depth_scale and T_base_camera) through the camera service.")
     p.add_argument("--backend", choices=list(CAMERA_BACKENDS), default="sim",
                    help="camera backend (services/camera/registry.py); sim starts the twin and the arm too")
-    p.add_argument("--object", default="milk", help="sim: HOPE object name or mesh path")
+    p.add_argument("--object", default=DEFAULT_OBJECT,
+                   help="sim: a demo object (carton, can, flat_box), a HOPE name, or a mesh file or folder")
     p.add_argument("--profile", default="ideal", help="sim: error profile")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--width", type=int, default=640)
-    p.add_argument("--height", type=int, default=480)
+    p.add_argument("--seed", type=int, default=0, help="sim: seed of the profile's drawn errors (default: %(default)s)")
+    p.add_argument("--width", type=int, default=640, help="image width in pixels (default: %(default)s)")
+    p.add_argument("--height", type=int, default=480, help="image height in pixels (default: %(default)s)")
     p.add_argument("--session", help="replay: session folder to read frames from")
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE", type=backend_option,
                    help="a camera backend's own option, passed to the camera service (repeatable), e.g. "
                         "--backend png_folder --option folder=DIR --option intrinsics=fx,fy,cx,cy")
     p.add_argument("--out", required=True, help="folder to write color.png, depth.png, meta.json")
-    p.add_argument("--port", type=int, default=DEFAULT_ROUTER_PORT)
+    p.add_argument("--port", type=int, default=DEFAULT_ROUTER_PORT,
+                   help="router port of the local cell to join or start (default: %(default)s)")
+    p.add_argument("--json", dest="json_output", action="store_true",
+                   help="print only one JSON object (out, valid_depth, capture_ms; or the error), no progress")
     add_network_args(p)
     p.set_defaults(func=run)
 
@@ -71,6 +76,9 @@ def _capture(s, args, robot: str):  # noqa: ANN001, ANN202 - zenoh session, argp
 
 
 def run(args) -> int:  # noqa: ANN001
+    console.quiet = bool(args.json_output)  # stdout is the JSON document only
+    if args.session:  # a replay camera reads this folder: a missing one is bad input, said before anything starts
+        require_path(args.session, "session folder")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     backends = CELLS["sim"] if args.backend == "sim" else {"camera": args.backend}
@@ -85,11 +93,7 @@ def run(args) -> int:  # noqa: ANN001
             extra["sim"] = start_args(args.object)
     robot = keys.DEFAULT_ROBOT
     if args.connect:  # a running cell elsewhere: use its services, start nothing
-        try:
-            session = remote_session(args.connect, services)
-        except ObjscanError as exc:
-            console.print(f"[red]{exc.message}[/red]")
-            return 1
+        session = remote_session(args.connect, services)
         try:
             frame, ms = _capture(session, args, robot)
         finally:

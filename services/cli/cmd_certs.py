@@ -21,21 +21,29 @@ from __future__ import annotations
 
 import argparse
 import ipaddress
+import json
 import shutil
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
-IDENTITIES = ("orchestrator", "camera", "arm", "sim", "registration", "grasp", "viewer", "operator")
+from common.errors import ObjscanError
+
+IDENTITIES = ("orchestrator", "camera", "arm", "sim", "registration", "grasp", "viewer", "operator", "ros2")
 """The identities of one cell (services, a read-only viewer, a person's CLI); each certificate's CN."""
 
 ROUTER_NAMES = ("zenoh-router", "localhost", "127.0.0.1", "::1")
 """Names the router is reached by (compose service name, loopback); clients verify one of them."""
 
 
-class CertError(RuntimeError):
+class CertError(ObjscanError):
     """Certificates could not be made (no openssl, bad name, openssl failed)."""
+
+    code = "cert_failed"
+
+    def __init__(self, message: str, *, code: str | None = None):
+        super().__init__(message, code=code)
 
 
 def _openssl() -> str:
@@ -64,7 +72,7 @@ def _san(names: tuple[str, ...] | list[str]) -> str:
 
 def _check_identity(name: str) -> None:
     if not name or not all(c.isalnum() or c in "-_." for c in name):
-        raise CertError(f"identity {name!r} must be letters, digits, '-', '_' or '.'")
+        raise CertError(f"identity {name!r} must be letters, digits, '-', '_' or '.'", code="bad_usage")
 
 
 def make_ca(out: Path, *, days: int = 825, name: str = "objscan lab CA") -> tuple[Path, Path]:
@@ -152,16 +160,17 @@ def _add_args(p: argparse.ArgumentParser) -> None:
                    help="extra DNS name or IP clients use to reach the router (repeatable)")
     p.add_argument("--days", type=int, default=825, help="validity in days (default: %(default)s)")
     p.add_argument("--force", action="store_true", help="discard an existing CA and start over")
+    p.add_argument("--json", dest="json_output", action="store_true",
+                   help="print one JSON object {name: certificate path} (or the error) instead of the list")
 
 
 def run(args) -> int:  # noqa: ANN001
-    try:
-        made = generate_lab_certs(Path(args.out), args.identities or IDENTITIES,
-                                  router_names=[*ROUTER_NAMES, *(args.router_names or [])], days=args.days,
-                                  force=args.force)
-    except CertError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
+    made = generate_lab_certs(Path(args.out), args.identities or IDENTITIES,
+                              router_names=[*ROUTER_NAMES, *(args.router_names or [])], days=args.days,
+                              force=args.force)
+    if args.json_output:
+        print(json.dumps({name: str(cert) for name, cert in made.items()}))
+        return 0
     for name, cert in made.items():
         print(f"{name:13s} {cert}")
     print(f"keep {Path(args.out) / 'ca.key'} offline; give each machine only ca.pem and its own .pem/.key")
@@ -169,9 +178,9 @@ def run(args) -> int:  # noqa: ANN001
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="objscan certs", description="make a lab CA and service certificates")
-    _add_args(p)
-    return run(p.parse_args(argv))
+    from services.cli.main import main as objscan
+
+    return objscan(["certs", *(argv if argv is not None else sys.argv[1:])])
 
 
 if __name__ == "__main__":

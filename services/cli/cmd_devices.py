@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from common.errors import ObjscanError
+from services.cli.outcome import require_path
 
 
 def register(sub) -> None:  # noqa: ANN001
@@ -22,7 +22,8 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--emulate-bus", action="store_true",
                    help="scan an emulated bus of the robot configuration's servos (no hardware needed)")
     p.add_argument("--robot-config", help="robot configuration YAML for --emulate-bus (default: PAPRAS)")
-    p.add_argument("--json", action="store_true", help="print one JSON object instead of tables")
+    p.add_argument("--json", dest="json_output", action="store_true",
+                   help="print one JSON object (cameras, bus, servos; or the error) instead of tables")
     p.set_defaults(func=run)
 
 
@@ -59,15 +60,10 @@ def list_servos(port: str | None, baud: int, emulate: bool, robot_config: str | 
 def run(args) -> int:  # noqa: ANN001
     cameras, why = list_cameras()
     bus = "emulated" if args.emulate_bus else args.port
-    try:
-        servos = list_servos(args.port, args.baud, args.emulate_bus, args.robot_config)
-    except ObjscanError as exc:
-        if args.json:
-            print(json.dumps({"cameras": cameras, "bus": bus, "error": {"code": exc.code, "message": exc.message}}))
-        else:
-            print(f"error [{exc.code}]: {exc.message}")
-        return 1
-    if args.json:
+    if args.robot_config:  # a missing file is bad input, said before any bus is opened
+        require_path(args.robot_config, "robot configuration")
+    servos = list_servos(args.port, args.baud, args.emulate_bus, args.robot_config)
+    if args.json_output:
         print(json.dumps({"cameras": cameras, "cameras_note": why, "bus": bus, "servos": servos}, indent=2))
         return 0
     print(f"cameras: {len(cameras)}" + (f" ({why})" if why else ""))

@@ -8,13 +8,13 @@ and the direction may be unknown (both are tried). Then ``objscan reconstruct SE
 
 from __future__ import annotations
 
-import json
 from dataclasses import replace
 from pathlib import Path
 
 from rich.markup import escape
 
 from services.cli.cmd_scan import console
+from services.cli.outcome import BadUsage, print_json, require_path
 
 
 def _turn_step(text: str) -> float | None:
@@ -43,6 +43,8 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--max-frames", type=int, default=None,
                    help="refuse a sequence that keeps more frames than this (default 360; use --every)")
     p.add_argument("--object", default="imported", help="object name written to session.json")
+    p.add_argument("--json", dest="json_output", action="store_true",
+                   help="no progress lines; print one JSON object at the end (session, views, turns, or the error)")
     p.add_argument("--camera-up", default=None,
                    help="the world's up in the camera's optical frame 'x,y,z' (default 0,-1,0: an upright camera)")
     p.add_argument("--no-focal-calibration", action="store_true",
@@ -52,11 +54,12 @@ def register(sub) -> None:  # noqa: ANN001
 
 
 def run(args) -> int:  # noqa: ANN001
+    require_path(args.source, "source")  # before the heavy imports: a missing source is said at once
     from services.importer.base_frame import BaseFrameConfig
-    from services.importer.errors import ImportError_
     from services.importer.session import ImportConfig, import_sequence
     from services.importer.sources import parse_intrinsics
 
+    console.quiet = bool(args.json_output)  # stdout is the JSON document only
     try:
         intr = parse_intrinsics(args.intrinsics) if args.intrinsics else None
         base = BaseFrameConfig() if args.camera_up is None else BaseFrameConfig(
@@ -68,21 +71,20 @@ def run(args) -> int:  # noqa: ANN001
             cfg = replace(cfg, max_frames=args.max_frames)
         if args.no_focal_calibration:
             cfg = replace(cfg, focal=replace(cfg.focal, enabled=False))
-    except (ValueError, ImportError_) as exc:
-        console.print(f"[red]error:[/red] {escape(str(exc))}")
-        return 2
+    except ValueError as exc:  # a number that is not one, a vector of the wrong length: bad usage
+        raise BadUsage(str(exc)) from None
 
     def progress(info: dict) -> None:
         console.print(" ".join(f"{k}={v}" for k, v in info.items()))
 
-    try:
-        report = import_sequence(args.source, Path(args.out), intr, cfg, progress=progress)
-    except ImportError_ as exc:
-        # escaped: "[code]" would otherwise be read as console markup and vanish from the message
-        console.print(f"[red]error[/red] {escape(f'[{exc.code}] {exc.message}')} "
-                      f"{escape(json.dumps(exc.detail, default=str))}")
-        return 1
+    report = import_sequence(args.source, Path(args.out), intr, cfg, progress=progress)
     t = report["turns"]
+    fc = report["focal_calibration"]
+    if args.json_output:
+        print_json({"session": str(args.out), "views": report["views"], "frames": report["frames"],
+                    "turns": t, "base_frame": report["base_frame"], "focal_calibration": fc,
+                    "seconds": report["seconds"]})
+        return 0
     console.print(f"session: {args.out}; {report['views']} views of {report['frames']} frames; turns {t['source']}, "
                   f"direction {t['direction']} ({t['direction_source']}); camera "
                   f"{report['base_frame']['camera_height_m'] * 100:.1f} cm above the table; {report['seconds']:.1f} s")
@@ -94,7 +96,6 @@ def run(args) -> int:  # noqa: ANN001
                                                          if loop.get("unsure_pairs") else ""))
     for why in loop.get("reasons", []):
         console.print(f"[yellow]unsure:[/yellow] {escape(why)}")
-    fc = report["focal_calibration"]
     console.print(f"focal length: {'x ' + format(fc['scale'], '.4f') if fc['applied'] else 'kept'} "
                   f"(fx {fc['fx_before']} -> {fc['fx_after']}): {fc['reason']}")
     return 0

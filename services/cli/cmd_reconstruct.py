@@ -18,9 +18,8 @@ from typing import Any
 import numpy as np
 
 from common.atomic import atomic_write_bytes
-from common.errors import ObjscanError
 from services.cli.cmd_scan import console
-from services.cli.outcome import FAILED, OK, one_line, print_json, report_error, warn_unaccepted
+from services.cli.outcome import FAILED, OK, error_line, print_json, require_path, warn_unaccepted
 
 
 def register(sub) -> None:  # noqa: ANN001
@@ -28,7 +27,8 @@ def register(sub) -> None:  # noqa: ANN001
                        description=__doc__.split("\n\n")[1] if __doc__ else None)
     p.add_argument("session", help="session folder (view_KK/scan_J/{color.png, depth.png, meta.json})")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--profile", default="default", choices=["default", "paper"], help="static registration profile")
+    p.add_argument("--profile", default="default", choices=["default", "paper"],
+                   help="static registration profile (default: %(default)s; paper: the paper's parameters)")
     p.add_argument("--workers", type=int, default=None,
                    help="worker processes for views and pair jobs (default: one per core from 4 cores up, else 1)")
     p.add_argument("--threads", type=int, default=None,
@@ -56,21 +56,22 @@ def ground_truth_points(gt: str, session: Path, n: int = 100_000) -> tuple[np.nd
 def run(args) -> int:  # noqa: ANN001
     """Exit 0 when a model was built (accepted or not: an unaccepted one is flagged on stderr and in the
     JSON), 1 when no model was built (the dynamic stage's error is printed; no accuracy figures)."""
+    session, out = require_path(args.session, "session folder"), Path(args.out)  # before the heavy imports
     from services.registration.reconstruct import reconstruct
     from services.registration.static.config import StaticConfig
 
-    session, out = Path(args.session), Path(args.out)
+    if args.gt:  # an unknown ground truth is said now, not after minutes of registration
+        from services.sim.catalogue import resolve_object
+
+        resolve_object(args.gt)
     t0 = time.perf_counter()
     console.quiet = bool(args.json_output)  # stdout is the JSON document only
 
     def progress(info: dict[str, Any]) -> None:
         console.print(" ".join(f"{k}={v}" for k, v in info.items() if not isinstance(v, (dict, list))))
 
-    try:
-        report = reconstruct(session, out, StaticConfig.for_profile(args.profile), progress=progress,
-                             workers=args.workers, threads=args.threads)
-    except ObjscanError as exc:
-        return report_error("reconstruct", exc, as_json=args.json_output)
+    report = reconstruct(session, out, StaticConfig.for_profile(args.profile), progress=progress,
+                         workers=args.workers, threads=args.threads)
     figures = report.get("model") if isinstance(report.get("model"), dict) else None
     built = figures is not None and "error" not in figures and figures.get("ply") is not None
     model = out / str(figures["ply"]) if built else None  # this run's model, never a file left by an earlier one
@@ -88,7 +89,7 @@ def run(args) -> int:  # noqa: ANN001
     atomic_write_bytes(out / "report.json", json.dumps(report, indent=2, default=float).encode())
     if model is None:
         err = (figures or {}).get("error") or {"code": "no_model", "message": "no model was built", "detail": {}}
-        print(one_line(f"objscan reconstruct: no model: {err['message']} [{err['code']}]"), file=sys.stderr)
+        print(error_line("reconstruct", f"no model: {err['message']}", err["code"]), file=sys.stderr)
         if args.json_output:
             print_json({"error": err, "accepted": False, "why": report.get("why", ""),
                         "report": str(out / "report.json")})

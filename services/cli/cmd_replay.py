@@ -12,8 +12,9 @@
   exactly as they were seen during the scan.
 
 Both re-runs print the comparison with the recorded model and exit 0 when the replay finished and its model is
-identical or within ``--tolerance-mm`` (1 when it differs, 2 when the replay itself failed). Details in
-``DIR/replay.json``; docs/recording.md explains what is compared.
+identical or within ``--tolerance-mm``; 1 when it differs or the replay itself failed (one line on stderr with
+its code); 2 when the recording does not exist or the arguments are wrong. Details in ``DIR/replay.json``;
+docs/recording.md explains what is compared.
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ import json
 import sys
 from typing import Any
 
-from common.errors import InvalidRequest, ObjscanError
+from common.errors import ObjscanError
+from services.cli.outcome import BadUsage, print_json, require_path
 from services.live import add_live_args, live_requested, open_live_view, replay_recording
 
 
@@ -50,24 +52,34 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_live_args(p)
     p.add_argument("--speed", type=float, default=5.0,
                    help="--foxglove view: replay at this multiple of the recorded time (default: %(default)s)")
+    p.add_argument("--json", dest="json_output", action="store_true",
+                   help="no progress; print one JSON object at the end (model, comparison, same; or the error)")
 
 
-def _print_comparison(report: dict[str, Any]) -> int:
+def _print_comparison(report: dict[str, Any], as_json: bool) -> int:
+    """The comparison with the recorded model: 0 the same (or within tolerance), 1 it differs or none was built."""
     cmp_ = report.get("comparison")
+    code = 0 if (cmp_ and (cmp_["identical"] or cmp_["within_tolerance"]
+                           or (cmp_.get("xyz_identical") and cmp_.get("rgb_identical")))) \
+        or (not cmp_ and report.get("model")) else 1
+    if as_json:
+        print_json({"model": report.get("model"), "comparison": cmp_, "same": code == 0})
+        return code
     if not cmp_:
-        print("no recorded model to compare with" if report.get("model") else "the replay produced no model")
-        return 0 if report.get("model") else 2
+        if report.get("model"):
+            print("no recorded model to compare with")
+            return 0
+        raise ObjscanError("the replay produced no model", code="no_model")
     if cmp_["identical"]:
         print(f"model identical to the recording ({cmp_['points_replayed']} points, byte for byte)")
-        return 0
-    if cmp_.get("xyz_identical") and cmp_.get("rgb_identical"):
+    elif cmp_.get("xyz_identical") and cmp_.get("rgb_identical"):
         print(f"model points and colours identical to the recording ({cmp_['points_replayed']} points, byte for "
               f"byte); normals differ by at most {cmp_.get('normals_max_diff', 0.0):.2g}")
-        return 0
-    print(f"model differs from the recording: chamfer {cmp_['chamfer_mm']} mm, hausdorff {cmp_['hausdorff_mm']} mm, "
-          f"points {cmp_['points_recorded']} -> {cmp_['points_replayed']} "
-          f"({'within' if cmp_['within_tolerance'] else 'beyond'} {cmp_['tolerance_mm']} mm)")
-    return 0 if cmp_["within_tolerance"] else 1
+    else:
+        print(f"model differs from the recording: chamfer {cmp_['chamfer_mm']} mm, hausdorff {cmp_['hausdorff_mm']} "
+              f"mm, points {cmp_['points_recorded']} -> {cmp_['points_replayed']} "
+              f"({'within' if cmp_['within_tolerance'] else 'beyond'} {cmp_['tolerance_mm']} mm)")
+    return code
 
 
 def _view(args: argparse.Namespace) -> int:
@@ -88,47 +100,48 @@ def _view(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    require_path(args.source, "recording")
     if args.out is None:
         if not live_requested(args):
-            raise InvalidRequest("give --out DIR (re-run the session) or a live-view flag (--rerun, --rerun-save, "
-                                 "--foxglove) to watch it")
+            raise BadUsage("give --out DIR (re-run the session) or a live-view flag (--rerun, --rerun-save, "
+                           "--foxglove) to watch it")
         return _view(args)
-    try:
-        if args.only == "registration":
-            from services.recording.registration import replay_registration
+    say = (lambda *a, **k: None) if args.json_output else print
+    if args.only == "registration":
+        from services.recording.registration import replay_registration
 
+        try:
             dyn = json.loads(args.dynamic_config) if args.dynamic_config else None
-            report = replay_registration(args.source, args.out, static_profile=args.static_profile,
-                                         dynamic_config=dyn, tolerance_mm=args.tolerance_mm, progress=print)
-        else:
-            from services.recording.replay import replay_session
+        except ValueError as exc:
+            raise BadUsage(f"--dynamic-config is not JSON: {exc}") from None
+        report = replay_registration(args.source, args.out, static_profile=args.static_profile,
+                                     dynamic_config=dyn, tolerance_mm=args.tolerance_mm, progress=say)
+    else:
+        from services.recording.replay import replay_session
 
-            def show(status: dict[str, Any]) -> None:
-                print(f"\rview {status.get('view')}: {status.get('state'):<12} "
-                      f"({status.get('views_done', 0)}/{status.get('views')} views)", end="", flush=True)
+        def show(status: dict[str, Any]) -> None:
+            say(f"\rview {status.get('view')}: {status.get('state'):<12} "
+                f"({status.get('views_done', 0)}/{status.get('views')} views)", end="", flush=True)
 
-            report = replay_session(args.source, args.out, atol=args.atol, tolerance_mm=args.tolerance_mm,
-                                    timeout_s=args.timeout, progress=show)
-            print()
-            status = report.get("status", {})
-            if status.get("status") != "done":
-                print(f"replay {status.get('status')}: {json.dumps(status.get('last_error'))}")
-                div = (report.get("arm") or {}).get("diverged") or (report.get("camera") or {}).get("diverged")
-                if div:
-                    print(f"diverged from the recording: {json.dumps(div)}")
-                print(f"details: {args.out}/replay.json")
-                return 2
-    except ObjscanError as exc:
-        print(f"replay failed: {exc}", file=sys.stderr)
-        return 2
-    print(f"model: {report.get('model')}")
-    return _print_comparison(report)
+        report = replay_session(args.source, args.out, atol=args.atol, tolerance_mm=args.tolerance_mm,
+                                timeout_s=args.timeout, progress=show)
+        say()
+        status = report.get("status", {})
+        if status.get("status") != "done":
+            err = status.get("last_error") or {}
+            div = (report.get("arm") or {}).get("diverged") or (report.get("camera") or {}).get("diverged")
+            raise ObjscanError(f"replay {status.get('status')}: {err.get('message', 'it did not finish')}"
+                               + (f"; diverged from the recording: {json.dumps(div)}" if div else "")
+                               + f"; details: {args.out}/replay.json",
+                               code=str(err.get("code") or "replay_failed"), detail={"replay": str(args.out)})
+    say(f"model: {report.get('model')}")
+    return _print_comparison(report, args.json_output)
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="objscan replay")
-    add_arguments(p)
-    return run(p.parse_args(argv))
+    from services.cli.main import main as objscan
+
+    return objscan(["replay", *(argv if argv is not None else sys.argv[1:])])
 
 
 if __name__ == "__main__":

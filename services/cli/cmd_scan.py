@@ -3,7 +3,7 @@
 With no cell running it starts the embedded default (a router on loopback and every service as its own
 process, sim backends) and stops what it started at the end. A cell started by ``objscan scan`` belongs to
 that run (a lock file per port, ``cell_lock_path``): a second ``objscan scan`` on the machine does not join
-it (it would share its orchestrator and status key and be stopped when the first exits, issue 17 #13) but
+it (it would share its orchestrator and status key and be stopped when the first exits) but
 starts a private cell on a free port, unless ``--port`` names the cell to join. ``--resume SESSION_DIR``
 continues a session whose orchestrator was killed, stopped or failed, re-using every frame already captured;
 on a session whose acquisition is still running (its CLI was killed, the private cell went on) it attaches:
@@ -18,7 +18,6 @@ The orchestrator this command starts is confined to the session's parent folder 
 from __future__ import annotations
 
 import fcntl
-import json
 import os
 import queue
 import signal
@@ -41,9 +40,11 @@ from common.messages import Ok, Request
 from common.zenoh_config import DEFAULT_ROUTER_PORT, free_tcp_port
 from services.cell import SERVICE_MODULES, cell_specs, needs_twin
 from services.cli.cells import add_network_args, remote_session, session_name
-from services.cli.outcome import USAGE, one_line, print_json, report_error, warn_unaccepted
+from services.cli.outcome import BadUsage, error_line, one_line, print_json, require_path, warn_unaccepted
+from services.cli.scan_config import FLAG_KEYS, add_config_args, scan_config
 from services.cli.stop import StopOnInterrupt
 from services.live import add_live_args, live_requested, open_live_view
+from services.orchestrator.config import AcquisitionConfig
 from services.private_cell import DEFAULT_GRACE_S, PrivateCell, cell_lock_path, find_cell, start_cell
 
 console = Console()
@@ -53,18 +54,10 @@ def register(sub) -> None:  # noqa: ANN001
     p = sub.add_parser("scan", help="run a whole acquisition: views, grasps, turns, model",
                        description="Acquire a model of an object: 12 views 30 degrees apart by default. Starts "
                                    "the services (sim backends) when none are running.")
-    p.add_argument("--object", default="milk", help="HOPE object name or mesh path (sim) (default: %(default)s)")
-    p.add_argument("--views", type=int, default=12)
-    p.add_argument("--profile", default="robot-turned", choices=["ideal", "hand-turned", "realistic", "robot-turned"],
-                   help="sim error profile (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--physics", default="mujoco", choices=["mujoco", "geometric"],
-                   help="sim: grasp, lift and set-down by MuJoCo contact physics, or the fast geometric checker "
-                        "with drawn errors (default: %(default)s)")
-    p.add_argument("--width", type=int, default=640)
-    p.add_argument("--height", type=int, default=480)
+    add_config_args(p)
     p.add_argument("--out", help="session folder (default: sessions/<object>-<time>)")
-    p.add_argument("--resume", metavar="SESSION_DIR", help="continue an interrupted session")
+    p.add_argument("--resume", metavar="SESSION_DIR",
+                   help="continue an interrupted session (its own config is kept; config flags are refused)")
     p.add_argument("--backend", choices=["sim", "real"], default="sim",
                    help="hardware backends when services must be started (default: %(default)s)")
     p.add_argument("--arm-backend", choices=["sim", "dynamixel"],
@@ -85,7 +78,11 @@ def register(sub) -> None:  # noqa: ANN001
                    help="register every view pair at the end, not while the arm turns (the old, slower path)")
     p.add_argument("--no-record", action="store_true", help="do not record the session to session.mcap")
     p.add_argument("--library", help="model library folder the model is added to (default: the orchestrator's)")
-    p.add_argument("--robot", default=keys.DEFAULT_ROBOT)
+    p.add_argument("--export", action="store_true",
+                   help="after a finished scan, export the model as a watertight textured mesh and a simulation "
+                        "asset (MJCF, URDF, GLB, OBJ, PLY, STL) into SESSION/export (docs/export.md)")
+    p.add_argument("--robot", default=keys.DEFAULT_ROBOT,
+                   help="robot cell id in the services' keys (default: %(default)s)")
     add_network_args(p)
     add_live_args(p)
     p.add_argument("--json", dest="json_output", action="store_true",
@@ -165,7 +162,7 @@ def arm_args(args) -> dict[str, list[str]]:  # noqa: ANN001
     """The arm service's own flags from ``--arm-backend``/``--emulate-bus``/``--robot-config``."""
     out: list[str] = []
     if args.emulate_bus and (args.arm_backend or "dynamixel") != "dynamixel":
-        raise SystemExit("--emulate-bus needs --arm-backend dynamixel")
+        raise BadUsage("--emulate-bus needs --arm-backend dynamixel")
     if args.arm_backend or args.emulate_bus:
         out += ["--backend", args.arm_backend or "dynamixel"]
     if args.emulate_bus:
@@ -175,23 +172,37 @@ def arm_args(args) -> dict[str, list[str]]:  # noqa: ANN001
     return {"arm": out} if out else {}
 
 
+def _check_resume(args) -> None:  # noqa: ANN001
+    """``--resume`` continues a session with the config it was started with: config flags are refused, and a
+    local session folder must exist (nothing is started for one that does not)."""
+    given = [f"--{k.replace('_', '-')}" for k in (*FLAG_KEYS, "config") if getattr(args, k, None) is not None]
+    if given:
+        raise BadUsage(f"--resume keeps the session's own config: drop {', '.join(given)}")
+    if not args.connect:
+        require_path(args.resume, "session folder")
+
+
 def run(args) -> int:  # noqa: ANN001
     t0 = time.time()
     console.quiet = bool(args.json_output)  # stdout is the JSON document only
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # unwind: the services this started are stopped
-    name = args.resume or args.out or f"sessions/{Path(args.object).stem}-{time.strftime('%Y%m%d-%H%M%S')}"
+    if args.resume:
+        _check_resume(args)
+        config = None
+    else:  # checked here, before any service starts: a bad file or flag is said at once, naming the key
+        config = scan_config(args)
+        if not args.connect and _names_a_file(config.object):  # a remote cell's paths are its own
+            require_path(config.object, "object mesh")
+    name = args.resume or args.out or \
+        f"sessions/{Path(config.object if config else 'session').stem}-{time.strftime('%Y%m%d-%H%M%S')}"
     if args.connect:  # a remote cell (compose, another machine): its orchestrator owns the sessions folder
         try:
             target = session_name(name)
         except ValueError as exc:  # a host path or '..': the cell's orchestrator owns the sessions folder
-            print(one_line(f"objscan scan: {exc}"), file=sys.stderr)
-            return USAGE
+            raise BadUsage(str(exc)) from None
+        session = remote_session(args.connect, ["orchestrator"])
         try:
-            session = remote_session(args.connect, ["orchestrator"])
-        except ObjscanError as exc:
-            return report_error("scan", exc, as_json=args.json_output)
-        try:
-            return _acquire(session, args, target, local=False, t0=t0)
+            return _acquire(session, args, config, target, local=False, t0=t0)
         finally:
             session.close()
     session_dir = Path(name).resolve()
@@ -200,15 +211,12 @@ def run(args) -> int:  # noqa: ANN001
         if kept is not None:
             console.print(f"the private cell on port {kept['port']} works on this session: attaching")
             with PrivateCell(int(kept["port"]), owner=False) as cell:
-                return _acquire(cell.session, args, str(session_dir), local=True, t0=t0)
+                return _acquire(cell.session, args, config, str(session_dir), local=True, t0=t0)
     # the orchestrator started here may write only the session's parent folder and the named library
     orchestrator_args = ["--sessions", str(session_dir.parent)]
     if args.library:
         orchestrator_args += ["--library", str(Path(args.library).resolve())]
-    # a twin started here may load the operator's mesh path (its object roots are otherwise HOPE and folders)
-    from services.sim.object_roots import start_args
-
-    sim_args = start_args(args.object) if getattr(args, "object", None) else []
+    sim_args = twin_args(config) if config is not None else []
     with ensure_cell(args.port, args.backend, session_dir / "logs",
                      extra_args={"orchestrator": orchestrator_args, **arm_args(args),
                                  **({"sim": sim_args} if sim_args else {})},
@@ -217,10 +225,66 @@ def run(args) -> int:  # noqa: ANN001
         # --out, name the session and let it place it there (a local absolute path would be refused)
         joined = "orchestrator" not in group.procs
         target = session_dir.name if joined and not args.out and not args.resume else str(session_dir)
-        return _acquire(group.session, args, target, local=True, t0=t0)
+        code = _acquire(group.session, args, config, target, local=True, t0=t0)
+    if code == 0 and getattr(args, "export", False):
+        code = export_after_scan(session_dir, quiet=bool(args.json_output))
+    return code
 
 
-def _acquire(session, args, target: str, *, local: bool, t0: float) -> int:  # noqa: ANN001
+def export_after_scan(session_dir: Path, *, quiet: bool) -> int:
+    """``--export``: the finished session exported into ``SESSION/export``; 1 with one line when it fails.
+
+    The scan's own JSON document (``--json``) stays the only thing on stdout: the export's figures are in
+    ``SESSION/export/export.json``.
+    """
+    from services.export import export_session
+
+    if not (session_dir / "model.ply").is_file():
+        print(one_line(f"objscan scan: --export: {session_dir} holds no model.ply here (a remote or joined "
+                       "cell's session): run objscan export on it where it is"), file=sys.stderr)
+        return 1
+    try:
+        r = export_session(session_dir, session_dir / "export")
+    except ObjscanError as exc:
+        print(one_line(f"objscan scan: export failed: {exc.message} [{exc.code}]"), file=sys.stderr)
+        return 1
+    if not quiet:
+        console.print(f"exported to {session_dir / 'export'} in {r['seconds']:.1f} s: watertight "
+                      f"{r['watertight']}, {r['parts']} convex part(s), files: "
+                      + ", ".join(f for files in r["files"].values() for f in files[:1]))
+    return 0
+
+
+def _names_a_file(obj: str) -> bool:
+    """Whether ``--object`` names a mesh file or folder (a path, or a mesh file name), not a catalogue name."""
+    from services.sim.catalogue import MESH_SUFFIXES
+
+    return os.sep in obj or Path(obj).suffix.lower() in MESH_SUFFIXES
+
+
+def twin_args(config: AcquisitionConfig) -> list[str]:
+    """The twin's start flags for a cell started for this scan: it starts with the scan's object in its units and
+    upright axis, so an object it cannot load stops the start with the twin's own error (``object_not_found``
+    and what it knows), and a mesh path is one it may load (its object roots are otherwise HOPE and folders)."""
+    from services.sim.object_roots import start_args
+
+    out = start_args(config.object) or ["--object", config.object]
+    if config.object_scale is not None:
+        out += ["--scale", repr(config.object_scale)]
+    if config.object_up_axis is not None:
+        out.append(f"--up-axis={config.object_up_axis}")
+    return out
+
+
+def config_params(config: AcquisitionConfig) -> dict[str, Any]:
+    """The ``config`` map of the orchestrator's ``run`` request: the keys that differ from the defaults (the
+    orchestrator fills in the same defaults, so it builds exactly ``config``)."""
+    defaults = AcquisitionConfig().to_dict()
+    return {k: v for k, v in config.to_dict().items() if v != defaults[k]}
+
+
+def _acquire(session, args, config: AcquisitionConfig | None, target: str, *, local: bool,  # noqa: ANN001
+             t0: float) -> int:
     """Start (or resume) the acquisition at ``target`` and follow it to the end."""
     updates: queue.Queue[dict[str, Any]] = queue.Queue()
 
@@ -243,11 +307,8 @@ def _acquire(session, args, target: str, *, local: bool, t0: float) -> int:  # n
     if args.resume:
         params = {"resume": target}
     else:
-        params = {"out": target, "config": {
-            "object": args.object, "views": args.views, "profile": args.profile, "seed": args.seed,
-            "physics": args.physics, "width": args.width, "height": args.height,
-            "force_first_slip": args.force_first_slip, "incremental": not args.no_incremental}}
-        params["record"] = not args.no_record
+        assert config is not None  # a new scan always has one (run builds it)
+        params = {"out": target, "config": config_params(config), "record": not args.no_record}
         if args.library:
             params["library"] = str(Path(args.library).resolve())
     if live is not None:
@@ -265,7 +326,7 @@ def _acquire(session, args, target: str, *, local: bool, t0: float) -> int:  # n
                                 lambda line: console.print(f"[yellow]{line}[/yellow]"))
     signal.signal(signal.SIGINT, on_sigint)
     try:
-        final = _follow(updates, args.views if not args.resume else None, session=mine)
+        final = _follow(updates, config.views if config is not None else None, session=mine)
         on_sigint.wait()  # the stop's answer (the arm's) is printed before the summary
     finally:
         sub.undeclare()
@@ -327,6 +388,9 @@ def _summary_json(final: dict[str, Any], session_dir: Path, seconds: float) -> i
         warn_unaccepted("scan", final)
     if status != "done":
         doc["error"] = final.get("last_error") or {"code": status or "unknown", "message": "scan did not finish"}
+        print(error_line("scan", f"{status} in state {doc['error'].get('state') or final.get('state')}: "
+                                 f"{doc['error'].get('message')}", str(doc["error"].get("code") or status)),
+              file=sys.stderr)
     print_json(doc)
     return 0 if status == "done" else 1
 
@@ -343,6 +407,8 @@ def _summary(final: dict[str, Any], session_dir: Path, seconds: float, resume_ar
         warn_unaccepted("scan", final)
         return 0
     err = final.get("last_error") or {}
-    console.print(f"[red]{status}[/red] in state {final.get('state')}: {json.dumps(err)}")
-    console.print(f"resume with: objscan scan --resume {resume_arg or session_dir}")
+    print(error_line("scan", f"{status} in state {err.get('state') or final.get('state')}: "
+                             f"{err.get('message') or 'scan did not finish'}; resume with: objscan scan --resume "
+                             f"{resume_arg or session_dir}", str(err.get("code") or status or "failed")),
+          file=sys.stderr)
     return 1

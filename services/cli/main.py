@@ -2,7 +2,9 @@
 
 Each sub-command lives in its own module with a ``register(subparsers)`` function; this file only
 assembles them and decides how a command ends (``services/cli/outcome.py``: exit codes, one-line
-errors, tracebacks only at debug level), so adding a command never touches the others.
+errors, tracebacks only at debug level), so adding a command never touches the others. A command reports a
+failure by raising (an ``ObjscanError`` with its code); it never prints an error itself. Results printed
+under ``--json`` use ``dest="json_output"`` so a failure is a JSON document there too.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ COMMANDS = [
     "services.cli.cmd_scan",
     "services.cli.cmd_capture",
     "services.cli.cmd_reconstruct",
+    "services.cli.cmd_export",
     "services.cli.cmd_import",
     "services.cli.cmd_models",
     "services.cli.cmd_report",
@@ -32,11 +35,12 @@ COMMANDS = [
     "services.cli.cmd_certs",
     "services.cli.cmd_devices",
     "services.cli.cmd_calibrate",
+    "services.cli.cmd_ros2_bag",
 ]
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = outcome.CliParser(
         prog="objscan",
         description="Autonomous object model acquisition with a robot arm and a wrist RGB-D camera.",
         epilog="Run 'objscan COMMAND --help' for a command's options. Exit codes: 0 ok, 1 failed, 2 bad "
@@ -59,6 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
+        print(f"objscan {args.command}: interrupted [interrupted]", file=sys.stderr)
         return outcome.INTERRUPTED
     except Exception as exc:  # every failure ends as one line + an exit code; the traceback at debug level
         return outcome.report_error(args.command, exc, as_json=bool(getattr(args, "json_output", False)))

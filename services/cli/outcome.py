@@ -1,5 +1,8 @@
 """How a command ends, for people and for scripts: exit codes, one-line errors, ``--json`` output.
 
+Exit codes: 0 ok, 1 failed (the job ran and did not succeed), 2 bad usage or input (a missing path, a bad
+value: ``INPUT_CODES``), 3 no Zenoh router, 4 no service answered, 130 interrupted.
+
 Every command returns 0 on success. A model that was built but not accepted by the dynamic stage's own
 checks is still a success (exit 0): the command prints one warning line on stderr and records
 ``accepted: false`` with ``why`` in its JSON output and ``report.json`` (``warn_unaccepted``).
@@ -11,12 +14,14 @@ The full traceback goes to the log at debug level (``objscan --debug ...`` or ``
 
 from __future__ import annotations
 
+import argparse
 import json
 import logging
 import sys
-from typing import Any
+from pathlib import Path
+from typing import Any, NoReturn
 
-from common.errors import ObjscanError
+from common.errors import InvalidRequest, ObjscanError
 
 log = logging.getLogger("objscan.cli")
 
@@ -27,11 +32,48 @@ NO_ROUTER = 3  # the Zenoh network could not be joined
 NO_SERVICE = 4  # joined, but no service answered
 INTERRUPTED = 130
 
+INPUT_CODES = frozenset({
+    "invalid_request", "bad_message", "bad_config", "bad_usage", "path_not_found", "invalid_config",
+    "bad_session", "bad_recording", "bad_source", "out_not_empty", "object_not_found", "bad_mesh", "bad_argument",
+    "model_not_found", "ambiguous_id", "not_a_library", "bad_network_config", "bad_value", "too_many_frames",
+    "no_frames", "bad_robot_config",
+})
+"""Error codes that mean the command was given something it cannot use (a missing path, a bad value): exit 2."""
+
 EXIT_BY_CODE = {
     "no_router": NO_ROUTER,
     "unavailable": NO_SERVICE, "timeout": NO_SERVICE, "no_services": NO_SERVICE,
-    "invalid_request": USAGE, "bad_message": USAGE, "bad_config": USAGE,
+    **{code: USAGE for code in INPUT_CODES},
 }
+
+
+class BadUsage(InvalidRequest):
+    """The command line asks for something the command cannot do (a flag combination, a value out of range)."""
+
+    code = "bad_usage"
+
+
+class PathNotFound(InvalidRequest):
+    """A path the command reads does not exist (bad input: exit 2, before any work starts)."""
+
+    code = "path_not_found"
+
+
+def require_path(path: str | Path, what: str) -> Path:
+    """``path`` when it exists, else ``PathNotFound`` naming ``what`` it should have been."""
+    p = Path(path).expanduser()
+    if not p.exists():
+        raise PathNotFound(f"{what} {path} does not exist", detail={"path": str(path)})
+    return p
+
+
+class CliParser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are the CLI's one line too: ``objscan scan: argument --views:
+    invalid int value: 'many' [bad_usage]`` on stderr, exit 2 (argparse's own voice is a usage block + a line)."""
+
+    def error(self, message: str) -> NoReturn:
+        print(one_line(f"{self.prog}: {message} [bad_usage]"), file=sys.stderr)
+        raise SystemExit(USAGE)
 
 
 def exit_code(exc: BaseException) -> int:
@@ -59,10 +101,16 @@ def report_error(command: str, exc: BaseException, *, as_json: bool) -> int:
     log.debug("objscan %s failed", command, exc_info=exc)
     hint = "" if log.isEnabledFor(logging.DEBUG) else " (run with --debug for the traceback)" \
         if err["code"] == "internal" else ""
-    print(one_line(f"objscan {command}: {err['message']} [{err['code']}]{hint}"), file=sys.stderr)
+    print(error_line(command, f"{err['message']}{hint}", err["code"]), file=sys.stderr)
     if as_json:
         print(json.dumps({"error": err}, default=str))
     return exit_code(exc)
+
+
+def error_line(command: str, message: str, code: str, limit: int = 1000) -> str:
+    """``objscan <command>: <message> [<code>]`` on one line; a long message is cut, never the code."""
+    tail = f" [{code}]"
+    return one_line(f"objscan {command}: {message}", limit - len(tail)) + tail
 
 
 def warn_unaccepted(command: str, result: dict[str, Any]) -> bool:

@@ -136,7 +136,7 @@ class GraspPlannerConfig:
     """Gap kept below a top-down TCP's pads (at the TCP's level) when choosing how deep it goes: the
     RH-P12-RN's finger links closed to ~2 cm reach 3 mm past the pad box (the arm's collision meshes: a
     straight-down TCP clears the table from 23 mm up, the pad box from 20 mm), and a registered table plane
-    was 2.7 mm below the arm's table (cream cheese, issue 16 session 6)."""
+    was 2.7 mm below the arm's table (cream cheese standing on edge, a 12-view physics scan)."""
     check_palm: bool = True
     """Also test a palm box against the table for frontal grasps (the paper tests the pads only)."""
     object_collision_min_points: int = 3

@@ -23,7 +23,8 @@ Crash safety (the rule, tested in tests/library/test_crash_safety.py):
   every entry folder without a row, indexes it if it is complete (``metadata.json`` parses, names this id,
   and every file it lists is there with the recorded size and SHA-256) or removes it if not.
 
-Ownership (issue 17 #2): a folder becomes a library only when it is absent or empty (then ``library.json``
+Ownership (a library never deletes what it did not create): a
+folder becomes a library only when it is absent or empty (then ``library.json``
 marks it), or already is one (the marker, or an older library's ``index.sqlite`` with our schema, which
 gets the marker). Anything else is refused with ``not_a_library`` before a single file is touched. The
 tidy-up removes only names the library itself creates (``<entry id>`` and ``<entry id>.<pid>``); anything

@@ -154,7 +154,7 @@ class Cell:
     async def capture(self, width: int, height: int) -> RGBDFrame:
         """A frame with a known camera pose. A frame stamped ``pose_source=unknown`` (a real camera whose
         pose query failed stamps the identity) is captured again, up to ``POSE_ATTEMPTS`` times, then
-        refused with ``no_camera_pose``: it would be registered at the base origin (issue 17 #12)."""
+        refused with ``no_camera_pose``: it would be registered at the base origin."""
         for attempt in range(1, POSE_ATTEMPTS + 1):
             reply = await self._request(keys.camera_capture(self.robot), CaptureRequest(width=width, height=height),
                                         timeout=60.0)

@@ -1,9 +1,10 @@
 """What one acquisition is asked to do, with defaults that work on the simulated cell.
 
 Every field is validated when a config is made (``__post_init__``) and ``from_dict`` refuses unknown keys:
-a config arrives over the network in the orchestrator's ``run`` request, and before issue 17 #4
-``views: 3.5`` or NaN left the session ``running`` forever and ``views: 100000000`` blocked the
-orchestrator's event loop. A bad value raises ``ConfigError`` (code ``invalid_config``) naming the field.
+a config arrives over the network in the orchestrator's ``run`` request (and from ``objscan scan --config``),
+and an unchecked ``views: 3.5`` or NaN would leave the session ``running`` forever, ``views: 100000000`` would
+block the orchestrator's event loop. A bad value raises ``ConfigError`` (code ``invalid_config``) naming the
+field; ``workspace_center`` must be within the arm's reach (``services/arm/workspace.py``).
 """
 
 from __future__ import annotations
@@ -15,6 +16,10 @@ from typing import Any
 
 from common.errors import InvalidRequest
 from common.pose_accuracy import PoseAccuracy, PoseAccuracyError
+from services.arm.workspace import TABLE_RADIUS_M, table_reach_problem
+
+UP_AXES = ("x", "y", "z", "-x", "-y", "-z")
+"""A mesh's upright axis as the twin takes it (``services/sim/catalogue.py``)."""
 
 
 class ConfigError(InvalidRequest):
@@ -70,6 +75,15 @@ def _known_keys(cls: type, data: Any, where: str) -> dict[str, Any]:
     return data
 
 
+def _plain(value: Any) -> Any:
+    """Tuples as lists, all the way down (``yaml.safe_dump`` and JSON write lists only)."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
 @dataclass
 class ScanGeometry:
     """How the 3 scan poses of a view are placed around the object (replacing the paper's fixed poses).
@@ -108,8 +122,9 @@ class RelocationConfig:
 
     def __post_init__(self) -> None:
         _flag("turn.relocation.enabled", self.enabled)
-        _number("turn.relocation.near_radius", self.near_radius, 0.25, 0.9)
-        _number("turn.relocation.max_radius", self.max_radius, self.near_radius, 0.9)
+        lo, hi = TABLE_RADIUS_M
+        _number("turn.relocation.near_radius", self.near_radius, lo, hi)
+        _number("turn.relocation.max_radius", self.max_radius, self.near_radius, hi)
         self.azimuths_deg = tuple(_numbers("turn.relocation.azimuths_deg", self.azimuths_deg, -90.0, 90.0))
         _number("turn.relocation.max_checks", self.max_checks, 1, 1000, integer=True)
         _number("turn.relocation.min_shift", self.min_shift, 0.0, 0.5)
@@ -183,6 +198,10 @@ class AcquisitionConfig:
     # pair registrations during the acquisition (services/orchestrator/incremental.py); off: all at the end
     incremental: bool = True
     workspace_center: tuple[float, float] = (0.60, 0.0)  # where the locate pose looks (and the twin puts the object)
+    # the object's mesh as the twin loads it: its file units in metres (0.001 for millimetres) and its upright
+    # axis ("y", "-z", ...); None: the file's own (HOPE: 0.01 and y; any other mesh: 1 and z)
+    object_scale: float | None = None
+    object_up_axis: str | None = None
     scan: ScanGeometry = field(default_factory=ScanGeometry)
     turn: TurnMotion = field(default_factory=TurnMotion)
 
@@ -213,13 +232,21 @@ class AcquisitionConfig:
         _flag("evaluate", self.evaluate)
         x, y = _numbers("workspace_center", self.workspace_center, -2.0, 2.0, length=2)
         self.workspace_center = (x, y)
+        why = table_reach_problem(x, y)
+        if why is not None:
+            raise _fail("workspace_center", f"is out of the arm's reach ({why})", [x, y])
+        if self.object_scale is not None:
+            _number("object_scale", self.object_scale, 0.0, 1000.0, lo_open=True)
+        if self.object_up_axis is not None and self.object_up_axis not in UP_AXES:
+            raise _fail("object_up_axis", f"must be one of {', '.join(UP_AXES)}", self.object_up_axis)
         if not isinstance(self.scan, ScanGeometry):
             raise _fail("scan", "must be a ScanGeometry", self.scan)
         if not isinstance(self.turn, TurnMotion):
             raise _fail("turn", "must be a TurnMotion", self.turn)
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        """Plain JSON/YAML values (lists, not tuples): what ``from_dict`` and ``objscan scan --config`` read."""
+        return _plain(asdict(self))
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> AcquisitionConfig:

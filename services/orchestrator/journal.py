@@ -14,7 +14,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-#: Version 1: the dict journal of sessions 1-4; version 2: this record (same keys, always all present).
+#: Version 1: the dict journal of the first releases; version 2: this record (same keys, always all present).
 JOURNAL_VERSION = 2
 
 

@@ -13,7 +13,8 @@ Recovery, as a robot on a real table needs it:
 - after ``max_rescans`` of one view the arm goes home with the gripper open and the run ends with a reason;
 - an e-stop from anywhere halts the arm at once and parks the machine in ``stopped`` (resumable).
 
-Irreversible steps are journalled before they start and when they end (issue 17 #6, #7): a re-scan writes
+Irreversible steps are journalled before they start and when they end, so a resume after a crash knows what
+already happened: a re-scan writes
 ``pending_rescan`` before it moves the old attempt aside; a turn writes ``turn_intent`` before the gripper
 closes (phase ``closing``), when the object is held (``holding``), and its completion (the new view and its
 commanded turn) right after the release, before the retreat. A resume first settles an open intent with what
@@ -262,9 +263,11 @@ class Acquisition:
         if self.j.simulated is None:
             try:
                 x, y = self.config.workspace_center
+                form = {k: v for k, v in (("scale", self.config.object_scale),
+                                          ("up_axis", self.config.object_up_axis)) if v is not None}
                 state = await self.cell.sim("reset", object=self.config.object, profile=self.config.profile,
                                             seed=self.config.seed, x=float(x), y=float(y),
-                                            physics=self.config.physics)
+                                            physics=self.config.physics, **form)
                 self.j.simulated = True
                 self._state_pose_accuracy(state.get("pose_accuracy"))
                 turn_sigma = state.get("turn_accuracy_deg")
@@ -343,19 +346,49 @@ class Acquisition:
                 await self.cell.move("home", speed=0.6)
             except RemoteError as exc:
                 self.decide("could not go home before choosing scan poses", code=exc.code)
-        reasons = []
-        for candidate in scan_pose_candidates(center, height, self.config.scan):
-            try:
-                for T in candidate:
-                    await self.cell.move("pose", target=T, frame="camera", dry_run=True)
-            except RemoteError as exc:
-                reasons.append(exc.code)
-                continue
+        candidate, reasons = await self._first_reachable_scan_set(center, height)
+        if candidate is not None:
             self.j.scan_sets[key] = [T.tolist() for T in candidate]
             return candidate
         raise AcquisitionFailed(f"view {view}: no reachable set of scan poses around the object; "
                                 f"limit: {name_scan_pose_limit(reasons)}",
                                 detail={"center": center.tolist(), "reasons": reasons[:6], "limit": "reach"})
+
+    async def _first_reachable_scan_set(self, center: np.ndarray, height: float, start_q: np.ndarray | None = None
+                                        ) -> tuple[list[np.ndarray] | None, list[str]]:
+        """The first candidate set of scan poses around an object at ``center`` whose every pose the arm
+        reaches (dry runs, from ``start_q`` when given, else from the current posture), and the refusals."""
+        reasons: list[str] = []
+        for candidate in scan_pose_candidates(center, height, self.config.scan):
+            try:
+                for T in candidate:
+                    await self.cell.move("pose", target=T, q=start_q, frame="camera", dry_run=True)
+            except RemoteError as exc:
+                if exc.code in ("estop_latched", "busy"):
+                    raise
+                reasons.append(exc.code)
+                continue
+            return candidate, reasons
+        return None, reasons
+
+    async def _scannable_spot(self, spot: np.ndarray, height: float, cache: dict[tuple, bool]) -> bool:
+        """Whether the object set down at ``spot`` can be scanned there: a relocated set-down that leaves no
+        reachable set of scan poses would end the acquisition at the next view, so such a spot is never
+        chosen. Checked from the home posture, where the next view's scan poses are planned from."""
+        key = tuple(np.round(np.asarray(spot, float)[:2], 3))
+        if key not in cache:
+            try:
+                start_q: np.ndarray | None = np.asarray((await self.cell.move("home", dry_run=True)).q, float)
+            except RemoteError as exc:
+                if exc.code in ("estop_latched", "busy"):
+                    raise
+                start_q = None  # the way home is blocked from here: plan from the current posture instead
+            candidate, reasons = await self._first_reachable_scan_set(np.asarray(spot, float), height, start_q)
+            cache[key] = candidate is not None
+            if candidate is None:
+                self.decide("relocated spot leaves no reachable scan poses", spot=list(key),
+                            limit=name_scan_pose_limit(reasons))
+        return cache[key]
 
     async def scan(self) -> State:
         k = self.view
@@ -575,6 +608,7 @@ class Acquisition:
         direct = self._candidates(view.center, view.height)
         late: list[tuple[int, Grasp, TurnPoses]] = []  # picks that were reachable; the turn or set-down was not
         relocations = 0
+        scannable: dict[tuple, bool] = {}  # relocation spots: can the object be scanned there?
         shifts = relocation_shifts(view.center, cfg.turn.relocation)
         tied = yaw_tied(list(self._plan.grasps)) and bool(shifts)
         fallback: tuple[int, Grasp, TurnPoses, np.ndarray] | None = None  # passed its check, not the look-ahead
@@ -608,6 +642,9 @@ class Acquisition:
                 # the whole pick-turn-place is planned and checked before the hand moves: an attempt that would
                 # stop half-way (a joint limit in the middle of the turn) would leave the object part-turned,
                 # and every later attempt would work on a view that no longer matches it
+                if relocating and not await self._scannable_spot(
+                        view.center + relocation_shift(seq), view.height, scannable):
+                    continue
                 checks += 1
                 relocations += relocating
                 self.j.counters.grasp_checks += 1
@@ -658,7 +695,7 @@ class Acquisition:
         self.j.grasp_mode = "auto"
         return await self._rescan(k, "no executable grasp")
 
-    # ------------------------------------------------------------------------ turn journal (issue 17 #6, #7)
+    # ------------------------------------------------------------------------------------- turn journal
     def _journal_turn_intent(self, phase: str | None, **fields: Any) -> None:
         """Write where a turn stands before the next irreversible step: ``closing`` (the gripper is about
         to close), ``holding`` (the object is held and may be lifted and turned), or ``None`` (over)."""
@@ -691,7 +728,7 @@ class Acquisition:
         self.store.save_journal(self.j.to_dict())
 
     async def _recover_turn(self) -> None:
-        """Settle a turn the previous orchestrator left open, from what the arm reports (issue 17 #6, #7).
+        """Settle a turn the previous orchestrator left open, from what the arm reports.
 
         - at the planned release pose after the object was held: the turn finished, only its record is
           missing; release if still closed and record it (never turn again);

@@ -1,5 +1,5 @@
 """Regrasp strategies: what the state machine tries when no pick-turn-place is executable where the object
-stands (issue 16 item 3). Plain functions over poses, so each is tested without a robot.
+stands. Plain functions over poses, so each is tested without a robot.
 
 Why they are needed: a thin box standing on edge (the HOPE cream cheese, 10.4 x 2.4 cm, 5.3 cm tall) has
 antipodal grasps only across its 2.4 cm thickness, which ties the hand's yaw to the box's (``yaw_tied``).

@@ -55,7 +55,8 @@ class OrchestratorService(Service):
         params = msg.params if isinstance(msg, Request) else {}
         if not isinstance(params, dict):
             raise InvalidRequest("run parameters must be a map")
-        # every path is checked against this orchestrator's roots before anything is created (issue 17 #3)
+        # every path is checked against this orchestrator's roots before anything is created, so a request cannot
+        # make the orchestrator write outside the folders it was started with
         library = self._library(params)
         if params.get("resume"):
             path = confine(params["resume"], self.sessions_root, what="resume")
@@ -66,13 +67,13 @@ class OrchestratorService(Service):
             path = confine(out, self.sessions_root, what="out")
             config = AcquisitionConfig.from_dict(params.get("config", {}))  # validated before the folder exists
             store = SessionStore.create(path)
-        store.acquire_lock()  # one orchestrator per session folder (issue 17 #8); released when the run ends
+        store.acquire_lock()  # one orchestrator per session folder; released when the run ends
         try:
             # session recording (docs/recording.md): on unless the run says ``record: false``
             self.current, run = recorded_acquisition(
                 lambda cell: Acquisition(cell, store, config, on_status=self._publish, library=library),
                 self.request, path, self.session, self.robot, enabled=params.get("record", True) is not False,
-                live=bool(params.get("live", False)))
+                live=bool(params.get("live", False)) or bool(self.settings.options.get("tap", False)))
         except BaseException:
             store.release_lock()
             raise
@@ -128,6 +129,9 @@ def main() -> None:
     p = service_arg_parser("objscan orchestrator: the acquisition state machine")
     p.add_argument("--sessions", default="sessions", help="root folder for new sessions (default: %(default)s)")
     p.add_argument("--library", default="models", help="model library folder (default: %(default)s)")
+    p.add_argument("--tap", action="store_true",
+                   help="publish every run's exchanges on orchestrator/tap, as a run with live: true does "
+                        "(the ROS 2 face republishes frames, clouds and the model from it)")
     args = p.parse_args()
     run_service(lambda: OrchestratorService(settings_from_args(args, sessions=args.sessions,
-                                                               library=args.library)))
+                                                               library=args.library, tap=args.tap)))

@@ -38,6 +38,7 @@ class Exchange:
     t_sent: float
     t_received: float
     part: int = 0
+    t_received_ns: int = 0  # the record's exact log time (float seconds lose ~0.2 us at today's epoch)
 
     def request_message(self) -> WireMessage | None:
         return decode(self.request) if self.request else None
@@ -54,6 +55,7 @@ class Recording:
     metadata: dict[str, dict[str, Any]] = field(default_factory=dict)
     exchanges: list[Exchange] = field(default_factory=list)
     samples: dict[str, list[tuple[float, bytes]]] = field(default_factory=dict)
+    sample_ns: dict[str, list[int]] = field(default_factory=dict)  # exact log times, parallel to ``samples``
     counts: dict[str, int] = field(default_factory=dict)  # topic -> messages read
     channels: dict[str, dict[str, Any]] = field(default_factory=dict)  # topic -> encoding, schema, metadata
     truncated: list[Path] = field(default_factory=list)  # files that ended without a footer
@@ -155,9 +157,10 @@ def read_recording(source: str | Path) -> Recording:
                     rec.exchanges.append(Exchange(
                         key=key, sequence=record.sequence, request=req.data if req is not None else b"",
                         reply=record.data, t_sent=record.publish_time / 1e9, t_received=record.log_time / 1e9,
-                        part=part))
+                        part=part, t_received_ns=record.log_time))
                 elif kind == "sample":
                     rec.samples.setdefault(key, []).append((record.log_time / 1e9, record.data))
+                    rec.sample_ns.setdefault(key, []).append(record.log_time)
     return rec
 
 

@@ -203,7 +203,7 @@ class SessionRecorder:
         """Record one request and its reply (the ``Cell.tap`` signature). Never blocks for long.
 
         Raises ``RecordingError`` (code ``recording_failed``) once the file could not be written: a session
-        that is recorded must not go on unrecorded without saying so (issue 17 #11)."""
+        that is recorded must not go on unrecorded without saying so."""
         if self.io_error is not None:
             raise RecordingError(f"the session recording {self.path.name} could not be written: {self.io_error}",
                                  code="recording_failed", detail={"path": str(self.path)})

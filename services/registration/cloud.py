@@ -94,7 +94,7 @@ def check_frame(frame: RGBDFrame) -> None:
         raise CloudError("intrinsics must be finite with positive focal lengths", code="bad_value")
     if not (np.isfinite(frame.depth_scale) and frame.depth_scale > 0):
         raise CloudError("depth_scale must be positive", code="bad_value", detail={"depth_scale": frame.depth_scale})
-    if (frame.meta or {}).get("pose_source") == "unknown":  # issue 17 #12: the identity stood in for a pose
+    if (frame.meta or {}).get("pose_source") == "unknown":  # the identity stood in for a failed pose query
         raise CloudError("frame has no camera pose (pose_source=unknown: the pose query failed when it was "
                          "captured); it cannot be placed in base", code="no_camera_pose")
     as_rigid_transform(frame.T_base_camera, "T_base_camera", CloudError)

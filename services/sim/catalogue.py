@@ -1,4 +1,5 @@
-"""The object catalogue: HOPE objects by name, or any user mesh, as a ``SimObject`` in metres, z up.
+"""The object catalogue: the demo objects and HOPE objects by name, or any user mesh, as a ``SimObject``
+in metres, z up.
 
 Every object is brought into one frame (docs/conventions.md, ``object``): metres, the upright axis is
 +z and the origin is the centre of the footprint on the table (bottom centre of the axis-aligned bounds).
@@ -19,6 +20,8 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 
+from services.sim.demo_files import MESH_FILE
+from services.sim.demo_objects import demo_folder, demo_names
 from services.sim.errors import SimObjectError
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
@@ -29,6 +32,9 @@ HOPE_SCALE = 0.01
 HOPE_UP_AXIS = "y"
 
 _AXES = {"x": 0, "y": 1, "z": 2}
+#: Folders (``os.pathsep``-separated) whose sub-folders and mesh files are objects by name, after the demo
+#: objects and HOPE; the twin's service also loads any mesh inside them by path (``object_roots.py``).
+ENV_OBJECT_DIRS = "OBJSCAN_SIM_OBJECT_DIRS"
 
 
 def hope_root() -> Path:
@@ -45,6 +51,31 @@ def hope_names() -> list[str]:
     if not root.is_dir():
         return []
     return sorted(d.name for d in root.iterdir() if d.is_dir() and _mesh_in_folder(d) is not None)
+
+
+def object_dirs(env: dict[str, str] | None = None) -> list[Path]:
+    """The user's object folders named by ``$OBJSCAN_SIM_OBJECT_DIRS`` (empty entries skipped)."""
+    environ = os.environ if env is None else env
+    return [Path(d).expanduser() for d in environ.get(ENV_OBJECT_DIRS, "").split(os.pathsep) if d.strip()]
+
+
+def named_in_folder(folder: Path, name: str) -> Path | None:
+    """The object called ``name`` in an object folder: its sub-folder, or a mesh file of that name."""
+    candidate = folder / name
+    if candidate.is_dir() or (candidate.is_file() and candidate.suffix.lower() in MESH_SUFFIXES):
+        return candidate
+    return None
+
+
+def how_to_name_objects(known_hope: list[str] | None = None) -> str:
+    """What can be named, for an ``object_not_found`` message: the demo objects, the HOPE objects found on
+    this machine, and how to add one's own."""
+    hope = hope_names() if known_hope is None else known_hope
+    text = f"demo objects: {', '.join(demo_names())}"
+    if hope:
+        text += f"; HOPE objects: {', '.join(hope)}"
+    return (f"{text}; for another object give --object PATH (a mesh file or a folder holding one) or add its "
+            f"folder to an object folder listed in ${ENV_OBJECT_DIRS}")
 
 
 def up_axis_rotation(up_axis: str) -> np.ndarray:
@@ -242,19 +273,30 @@ def _mesh_in_folder(folder: Path) -> Path | None:
 
 
 def resolve_object(name_or_path: str) -> tuple[str, Path, bool]:
-    """(name, mesh path, is_hope) for a HOPE name, a mesh file or a folder holding one."""
+    """(name, mesh path, is_hope) for a demo object's name, a HOPE name, an object in a folder of
+    ``$OBJSCAN_SIM_OBJECT_DIRS`` (by name), a mesh file or a folder holding one."""
     text = str(name_or_path).strip()
     if not text:
-        raise SimObjectError("object name is empty", code="object_not_found")
+        raise SimObjectError(f"object name is empty ({how_to_name_objects()})", code="object_not_found")
     path = Path(text).expanduser()
     root = hope_root()
-    # a bare name is a HOPE name first (a folder of that name where the process runs does not shadow it)
     bare = len(path.parts) == 1 and text not in (".", "..")
+    # a bare name is a demo object's or a HOPE name first (a folder of that name where the process runs does
+    # not shadow it)
+    demo = demo_folder(text) if bare else None
+    if demo is not None:
+        return text, demo / MESH_FILE, False
     if path.suffix.lower() not in MESH_SUFFIXES and (bare or not path.is_dir()) and (root / text).is_dir():
         mesh = _mesh_in_folder(root / text)
         if mesh is None:
             raise SimObjectError(f"HOPE object {text!r} has no mesh in {root / text}", code="object_not_found")
         return text, mesh, True
+    if bare:
+        for folder in object_dirs():
+            found = named_in_folder(folder, text)
+            if found is not None:
+                path = found
+                break
     if path.is_dir():
         mesh = _mesh_in_folder(path)
         if mesh is None:
@@ -267,14 +309,15 @@ def resolve_object(name_or_path: str) -> tuple[str, Path, bool]:
                                  code="bad_mesh", detail={"path": str(path)})
         return path.stem, path, False
     known = hope_names()
-    raise SimObjectError(
-        f"unknown object {text!r}: not a HOPE name ({', '.join(known) or f'no HOPE data at {root}'}) "
-        "nor an existing mesh file", code="object_not_found", detail={"name": text, "known": known})
+    raise SimObjectError(f"unknown object {text!r}: not an object name nor an existing mesh file or folder "
+                         f"({how_to_name_objects(known)})", code="object_not_found",
+                         detail={"name": text, "demo": demo_names(), "known": known})
 
 
 def load_object(name_or_path: str, *, scale: float | None = None, up_axis: str | None = None) -> SimObject:
-    """Load a HOPE object by name (``milk``, ...) or any mesh file (OBJ/PLY/STL/GLB, textured or vertex
-    coloured), in metres with z up and the bottom centre of the footprint at the origin.
+    """Load a demo object (``carton``, ``can``, ``flat_box``), a HOPE object by name (``milk``, ...) or any
+    mesh file (OBJ/PLY/STL/GLB, textured or vertex coloured), in metres with z up and the bottom centre of
+    the footprint at the origin.
 
     ``scale`` multiplies the file's units into metres (HOPE default 0.01, otherwise 1.0); ``up_axis`` names
     the file's upright axis ("y", "-z", ...; HOPE default "y", otherwise "z"). Parsed meshes are cached;

@@ -68,12 +68,14 @@ def solidity(vertices: np.ndarray, triangles: np.ndarray) -> float:
     return vol / hull if hull > 0 else 0.0
 
 
-def convex_parts(vertices: np.ndarray, triangles: np.ndarray, method: str = "auto") -> tuple[list[np.ndarray], str]:
+def convex_parts(vertices: np.ndarray, triangles: np.ndarray, method: str = "auto",
+                 params: dict | None = None) -> tuple[list[np.ndarray], str]:
     """Convex parts (each an (n, 3) array of hull vertices, object frame) and the method that made them.
 
     ``method`` is "auto" (hull when nearly convex, else coacd), "coacd" (falls back to "hull" when coacd
-    is not installed) or "hull".
+    is not installed) or "hull". ``params`` replaces ``COACD_PARAMS`` (the export asks for tighter parts).
     """
+    params = dict(COACD_PARAMS if params is None else params)
     if method not in ("auto", "coacd", "hull"):
         raise SimInputError(f"collision method must be 'auto', 'coacd' or 'hull', got {method!r}", code="bad_value")
     v = np.ascontiguousarray(vertices, dtype=np.float64)
@@ -82,24 +84,24 @@ def convex_parts(vertices: np.ndarray, triangles: np.ndarray, method: str = "aut
         method = "hull" if solidity(v, t) >= SOLIDITY_FOR_HULL else "coacd"
     if method == "hull" or not have_coacd():
         return [hull_vertices(v)], "hull"
-    key = hashlib.sha256(v.tobytes() + t.tobytes() + repr(sorted(COACD_PARAMS.items())).encode()).hexdigest()[:24]
+    key = hashlib.sha256(v.tobytes() + t.tobytes() + repr(sorted(params.items())).encode()).hexdigest()[:24]
     with _lock:
         if key in _memory:
             return [p.copy() for p in _memory[key]], "coacd"
         path = cache_dir() / f"coacd-{key}.npz"
         parts = _load(path)
         if parts is None:
-            parts = _run_coacd(v, t)
+            parts = _run_coacd(v, t, params)
             _save(path, parts)
         _memory[key] = parts
         return [p.copy() for p in parts], "coacd"
 
 
-def _run_coacd(v: np.ndarray, t: np.ndarray) -> list[np.ndarray]:
+def _run_coacd(v: np.ndarray, t: np.ndarray, params: dict) -> list[np.ndarray]:
     import coacd
 
     coacd.set_log_level("error")
-    parts = coacd.run_coacd(coacd.Mesh(v, t), **COACD_PARAMS)
+    parts = coacd.run_coacd(coacd.Mesh(v, t), **params)
     out = []
     for pv, _ in parts:
         pv = np.asarray(pv, dtype=np.float64)

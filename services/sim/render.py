@@ -20,7 +20,7 @@ import open3d as o3d
 from numba import njit
 from scipy.ndimage import gaussian_filter
 
-from common.messages import Intrinsics
+from common.messages import Intrinsics, d435_intrinsics
 from services.sim.catalogue import DEFAULT_COLOR, SimObject
 from services.sim.errors import SimInputError, check_transform
 from services.sim.sensor_model import D435Noise, apply_d435_noise
@@ -432,3 +432,20 @@ def render(scene: RenderScene, T_base_camera: np.ndarray, intrinsics: Intrinsics
     depth_mm = np.rint(depth_m * 1000.0)
     depth = np.where(depth_mm <= 65535.0, depth_mm, 0.0).astype(np.uint16)
     return RenderResult(color=color, depth=depth, labels=labels, depth_true=depth_true)
+
+
+def warm_up(obj: SimObject | None) -> None:
+    """Compile (or load from numba's on-disk cache) the shading and D435 kernels now, by rendering one noisy
+    frame of ``obj`` from above.
+
+    A fresh checkout or image has no compiled kernels yet, and the first frame would wait for numba: seconds on
+    an idle machine, more than the camera waits for a frame on a loaded one (the first capture of a demo from
+    a fresh clone then failed with a timeout). The twin's service calls this before it says it is ready.
+    """
+    T_object = np.eye(4)
+    T_object[:2, 3] = (0.5, 0.0)
+    T_camera = np.eye(4)
+    T_camera[:3, :3] = np.diag([1.0, -1.0, -1.0])  # optical z pointing down at the table
+    T_camera[:3, 3] = (0.5, 0.0, 0.5)
+    render(RenderScene(obj, T_object), T_camera, d435_intrinsics(), noise=D435Noise.calibrated(),
+           rng=np.random.default_rng(0))

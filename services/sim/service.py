@@ -31,7 +31,9 @@ from common.errors import InvalidRequest
 from common.log import event
 from common.messages import D435_COLOR_SIZES, JointState, Ok, Request, RGBDFrame, d435_intrinsics
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from services.sim.demo_objects import DEFAULT_OBJECT
 from services.sim.object_roots import ObjectRoots
+from services.sim.render import warm_up
 from services.sim.state_file import StateFile, resolve_state_path
 from services.sim.world import World, default_object_pose
 
@@ -65,12 +67,14 @@ class SimService(Service):
             event(log, "world restored from the state file", path=str(path), object=self.world.obj.name,
                   frames=self.seq, attached=self.world.attached)
         else:
-            self.world = await self.run_cpu(lambda: World(opts.get("object", "milk"),
+            self.world = await self.run_cpu(lambda: World(opts.get("object", DEFAULT_OBJECT),
                                                           profile=opts.get("profile", "ideal"),
                                                           seed=int(opts.get("seed", 0)),
-                                                          physics=opts.get("physics", "geometric")))
+                                                          physics=opts.get("physics", "geometric"),
+                                                          scale=opts.get("scale"), up_axis=opts.get("up_axis")))
             self.seq = 0
         self._persist()
+        await self.run_cpu(warm_up, self.world.obj)  # compiled kernels before the first frame is asked for
         self._world_lock = asyncio.Lock()
         r = self.robot
         self.queryable(keys.sim(r, "render"), self.render)
@@ -123,8 +127,14 @@ class SimService(Service):
                 current = (w.obj.name, None if w.obj.source is None else str(w.obj.source))
                 requested = params.get("object", w.obj.name)
                 checked = self.object_roots.check(requested, current)
-                # the object the world holds is reused as it is (a mesh given by path has only a stem as name)
-                obj = w.obj.copy() if checked in current else checked
+                scale = _number(params, "scale", None, 1e-6, 1000.0) if params.get("scale") is not None else None
+                up_axis = _up_axis(params.get("up_axis"))
+                same_form = (scale is None or scale == w.obj.scale) and \
+                    (up_axis is None or up_axis == str(w.obj.up_axis).strip().lower().lstrip("+"))
+                # the object the world holds is reused as it is (a mesh given by path has only a stem as name),
+                # unless it is asked in other units or another upright axis: then reloaded from its file
+                reuse = checked in current
+                obj = checked if not reuse else w.obj.copy() if same_form else (current[1] or checked)
                 profile = params.get("profile", w.profile.name)
                 seed = int(params.get("seed", w.seed))
                 physics = str(params.get("physics", w.physics))
@@ -133,7 +143,7 @@ class SimService(Service):
                     pose = default_object_pose(float(params.get("x", 0.6)), float(params.get("y", 0.0)),
                                                float(params.get("yaw_deg", 0.0)))
                 new = await self.run_cpu(lambda: World(obj, profile=profile, seed=seed, object_pose=pose,
-                                                       physics=physics))
+                                                       physics=physics, scale=scale, up_axis=up_axis))
                 if w.joint_names:  # the arm has not moved: the new world knows where it is
                     new.set_joint_state(w.joint_names, w.joint_positions, T_base_gripper=w.T_base_gripper,
                                         T_base_camera=w.T_base_camera)
@@ -226,13 +236,30 @@ def _number(params: dict, name: str, default: float, lo: float, hi: float) -> fl
     return float(value)
 
 
+def _up_axis(value: object) -> str | None:
+    """A request's ``up_axis`` (None: the file's own), checked like the catalogue does."""
+    if value is None:
+        return None
+    if not isinstance(value, str) or value.strip().lower().lstrip("+") not in ("x", "y", "z", "-x", "-y", "-z"):
+        raise InvalidRequest("up_axis must be one of x, y, z, -x, -y, -z", detail={"up_axis": repr(value)[:40]})
+    return value.strip().lower().lstrip("+")
+
+
 def main() -> None:
     p = service_arg_parser("objscan digital twin (simulated table, object, arm, gripper and D435)")
-    p.add_argument("--object", default="milk", help="HOPE object name or a mesh path (default: %(default)s)")
+    p.add_argument("--object", default=DEFAULT_OBJECT,
+                   help="the object to start with: a demo object (carton, can, flat_box), a HOPE name or a mesh "
+                        "path (default: %(default)s)")
     p.add_argument("--object-dir", action="append", default=[], metavar="DIR",
-                   help="a folder whose meshes a reset request may name (repeatable; also "
-                        "$OBJSCAN_SIM_OBJECT_DIRS). Besides these, only HOPE objects, the --object given "
-                        "here and the world's current object can be loaded")
+                   help="a folder whose meshes a reset request may name, by path or by the name of a sub-folder or "
+                        "mesh file in it (repeatable; also $OBJSCAN_SIM_OBJECT_DIRS). Besides these, only the demo "
+                        "objects, HOPE objects, the --object given here and the world's current object can be "
+                        "loaded")
+    p.add_argument("--scale", type=float, default=None,
+                   help="the --object mesh's units in metres, e.g. 0.001 for millimetres (default: the file's own: "
+                        "HOPE 0.01, other meshes 1)")
+    p.add_argument("--up-axis", default=None, metavar="AXIS",
+                   help="the --object mesh's upright axis: x, y, z, -x, -y or -z (default: HOPE y, other meshes z)")
     p.add_argument("--profile", default="ideal", help="error profile: ideal | hand-turned | realistic | robot-turned")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--physics", default="geometric", choices=["geometric", "mujoco"],
@@ -244,6 +271,7 @@ def main() -> None:
                    help="ignore a saved world and start from --object/--profile/--seed (overwrites the file)")
     args = p.parse_args()
     run_service(lambda: SimService(settings_from_args(args, object=args.object, object_dirs=args.object_dir,
+                                                      scale=args.scale, up_axis=args.up_axis,
                                                       profile=args.profile,
                                                       seed=args.seed, physics=args.physics,
                                                       state_file=args.state_file,

@@ -32,6 +32,6 @@ def test_up_refuses_a_bad_robot_config_before_starting_anything(tmp_path, capsys
     bad = tmp_path / "arm.yaml"
     bad.write_text(yaml.safe_dump(data))
     assert main(["up", "--robot-config", str(bad), "--port", "1", "--log-dir", str(tmp_path / "logs")]) == 2
-    out = capsys.readouterr().out
-    assert "bad_robot_config" in out and "robot1/joint1" in out and "speed" in out
+    err = capsys.readouterr().err  # one line on stderr, like every command's failure
+    assert "bad_robot_config" in err and "robot1/joint1" in err and "speed" in err
     assert not (tmp_path / "logs").exists()

@@ -109,7 +109,7 @@ def test_estop_over_zenoh_halts_a_running_motion(arm_cell):
 
 
 def test_a_second_command_while_moving_is_refused_busy_and_the_orchestrators_cell_waits_it_out(arm_cell):
-    """What a resumed orchestrator meets when the killed one left the arm moving (the CI failure of session 2):
+    """What a resumed orchestrator meets when the killed one left the arm moving (a CI run once failed this way):
     the arm refuses, it does not queue; the orchestrator's ``Cell`` retries ``busy`` until the motion ends."""
     import asyncio
 

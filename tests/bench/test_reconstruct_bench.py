@@ -144,13 +144,14 @@ def test_the_printed_table_labels_each_object_by_set_and_name():
 
 
 def test_set_is_refused_by_a_bench_without_object_sets(capsys):
-    from argparse import Namespace
-
-    from services.cli.cmd_bench import available, run
+    from services.cli.cmd_bench import available
+    from services.cli.main import main
 
     assert "harsh_set" not in available() and "multiway_peer" not in available() and "reconstruct" in available()
-    assert run(Namespace(name="transport", quick=True, object_set="harsh", json=None)) == 2
-    assert "--set is for reconstruct" in capsys.readouterr().out
+    assert main(["bench", "transport", "--quick", "--set", "harsh"]) == 2
+    captured = capsys.readouterr()
+    assert captured.err.splitlines() == ["objscan bench: transport has no object sets (--set is for reconstruct) "
+                                         "[bad_usage]"] and captured.out == ""
 
 
 @pytest.mark.slow

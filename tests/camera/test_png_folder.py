@@ -1,4 +1,4 @@
-"""The png_folder camera backend (issue 18's proof that a backend is one folder plus one registry line):
+"""The png_folder camera backend (a backend is one folder plus one registry line):
 it plays a folder of colour/depth PNG pairs with the given intrinsics, in the unit and as a real camera
 service process answering captures over Zenoh."""
 

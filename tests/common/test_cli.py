@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import time
@@ -53,7 +54,10 @@ def test_call_prints_decoded_reply_and_typed_errors(two_echoes):
     assert res.returncode == 0, res.stderr
     reply = json.loads(res.stdout)
     assert reply["type"] == "Request" and reply["params"]["x"] == [1, 2, 3]
-    res = objscan("call", "objscan/test/alpha/crash", "--connect", ep)
-    assert res.returncode == 1 and json.loads(res.stdout)["error"] == "internal"
+    res = objscan("call", "objscan/test/alpha/crash", "--connect", ep, "--json")
+    assert res.returncode == 1 and json.loads(res.stdout)["error"]["code"] == "internal"
+    assert len(res.stderr.splitlines()) == 1 and res.stderr.startswith("objscan call: ")
+    assert res.stderr.rstrip().endswith("[internal]"), res.stderr
     res = objscan("call", "objscan/test/nobody/echo", "--connect", ep, "--timeout", "2")
-    assert res.returncode == 1 and json.loads(res.stdout)["error"] in ("unavailable", "timeout")
+    assert res.returncode == 4 and res.stdout == ""
+    assert re.fullmatch(r"objscan call: .+ \[(unavailable|timeout)\]\n", res.stderr), res.stderr

@@ -1,6 +1,6 @@
 """Every CLI command that talks to a cell honours ``--connect`` (and the TLS variables through it), and a
 remote ``objscan scan`` sends session paths relative to the orchestrator's sessions root, so sessions
-land inside the sessions volume of a compose cell (issue 13 item 6)."""
+land inside the sessions volume of a compose cell."""
 
 from __future__ import annotations
 
@@ -94,5 +94,5 @@ def test_a_missing_tls_file_is_a_clear_error(tmp_path):
            "OBJSCAN_ZENOH_TLS_CA": str(tmp_path / "nope" / "ca.pem")}
     proc = subprocess.run([sys.executable, "-m", "services.cli", "scan", "--connect", "tls/127.0.0.1:9", "--out",
                            "x"], capture_output=True, text=True, timeout=60, env=env)
-    assert proc.returncode == 1 and "ca.pem does not exist" in proc.stderr, proc.stdout + proc.stderr
+    assert proc.returncode == 2 and "ca.pem does not exist" in proc.stderr, proc.stdout + proc.stderr  # bad input
     assert len(proc.stderr.strip().splitlines()) == 1  # one line, no traceback

@@ -12,7 +12,7 @@ from pathlib import Path
 from common.launcher import ProcessSpec
 from common.zenoh_config import free_tcp_port
 from services.cli import outcome
-from services.cli.cmd_scan import _summary_json
+from services.cli.cmd_scan import _summary, _summary_json
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -78,10 +78,17 @@ def test_scan_json_summary_done_and_failed(capsys, tmp_path):
     doc = json.loads(capsys.readouterr().out)
     assert doc["status"] == "done" and doc["accuracy"] == {"chamfer_mm": 1.2} and doc["seconds"] == 12.3
     assert "error" not in doc and doc["session"] == str(tmp_path)
-    failed = {"status": "failed", "state": "grasp", "last_error": {"code": "no_grasp", "message": "none left"}}
+    failed = {"status": "failed", "state": "failed",
+              "last_error": {"code": "no_grasp", "message": "none left", "state": "grasp"}}
     assert _summary_json(failed, tmp_path, 1.0) == 1
-    doc = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    doc = json.loads(captured.out)
     assert doc["status"] == "failed" and doc["error"]["code"] == "no_grasp"
+    assert captured.err.splitlines() == ["objscan scan: failed in state grasp: none left [no_grasp]"]
+    assert _summary(failed, tmp_path, 1.0) == 1  # without --json: the line alone, stdout empty
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.splitlines() == [
+        f"objscan scan: failed in state grasp: none left; resume with: objscan scan --resume {tmp_path} [no_grasp]"]
 
 
 def test_exit_codes_follow_error_codes():

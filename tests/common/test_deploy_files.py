@@ -37,7 +37,7 @@ SERVICES = [name for name in COMPOSE["services"] if name != "zenoh-router"]
 
 
 def test_every_objscan_service_is_in_compose():
-    assert set(SERVICES) == {"sim", "camera", "arm", "registration", "grasp", "orchestrator"}
+    assert set(SERVICES) == {"sim", "camera", "arm", "registration", "grasp", "orchestrator", "ros2"}
 
 
 @pytest.mark.parametrize("name", SERVICES)

@@ -1,4 +1,4 @@
-"""No import cycle among objscan's own modules, computed from the code (issue 18).
+"""No import cycle among objscan's own modules, computed from the code.
 
 Every ``import`` counts, wherever it stands: at module level, inside a function (a delayed import only hides a
 cycle, it does not break it) or under ``TYPE_CHECKING``. Importing ``a.b.c`` also runs the packages ``a`` and

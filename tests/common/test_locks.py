@@ -9,7 +9,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
 # websockets (the Foxglove test's client) is in the test extra but not a tool: mujoco-studio needs it at run time
-DEV_TOOLS = {"pytest", "pytest-timeout", "hypothesis", "ruff", "atheris", "trimesh"}
+DEV_TOOLS = {"pytest", "pytest-timeout", "hypothesis", "ruff", "atheris"}  # trimesh: the export needs it at run time
 
 
 def _pins(lock: str) -> dict[str, str]:

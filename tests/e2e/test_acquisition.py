@@ -16,6 +16,7 @@ import pytest
 
 from common import keys
 from common.client import request_sync
+from common.errors import RequestTimeout
 from common.launcher import ProcessSpec, ServiceGroup
 from common.messages import Ok, Request
 from services.cell import cell_specs
@@ -51,8 +52,17 @@ def start(group: ServiceGroup, out: Path, **config) -> None:
 
 def wait_until(group: ServiceGroup, predicate, timeout: float = 900.0) -> dict:  # noqa: ANN001
     deadline = time.monotonic() + timeout
+    s: dict = {}
+    late = 0  # status answers later than 10 s in a row (a machine loaded far beyond its cores); 3 end the wait
     while time.monotonic() < deadline:
-        s = status(group)
+        try:
+            s = status(group)
+        except RequestTimeout:
+            late += 1
+            if late >= 3:
+                raise
+            continue
+        late = 0
         if predicate(s):
             return s
         time.sleep(0.5)

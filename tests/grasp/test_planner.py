@@ -194,7 +194,7 @@ def test_too_wide_object_is_rejected_with_the_reason():
 
 def test_low_object_collides_with_the_table():
     # a thin lying bottle, 4.4 cm tall: tall enough to try a frontal grasp, but its antipodal band is
-    # around 2.2 cm, where the 5.4 cm palm reaches into the table
+    # near 2.2 cm, where the 5.4 cm palm reaches into the table
     p, n = S.cylinder(0.022, 0.12, lying_along=np.array([1.0, 0.3, 0.0]), view_from=S.scan_cameras())
     plan = plan_grasps(p, n, S.table_plane(), GraspPlannerConfig(mode="frontal"))
     assert not plan.grasps

@@ -1,6 +1,6 @@
-"""Issue 17 #10: ``arm/scene`` changing the collision model while a motion is checked in another thread.
+"""``arm/scene`` changing the collision model while a motion is checked in another thread.
 
-Before: the check read Pinocchio's geometry data while the scene rebuilt it; the process died of heap
+Why: the check read Pinocchio's geometry data while the scene rebuilt it; the process died of heap
 corruption (SIGABRT) within a second. Now one lock covers scene changes and checks, and a trajectory is
 checked against one scene throughout (its answer is one of the two scenes' answers)."""
 

@@ -1,6 +1,6 @@
-"""Issue 17 #4: ``AcquisitionConfig`` validates every field with a clear, typed error.
+"""``AcquisitionConfig`` validates every field with a clear, typed error.
 
-Before: ``from_dict`` copied whatever it was given: ``views: 3.5`` or NaN left a session ``running`` forever
+Why: ``from_dict`` copied whatever it was given: ``views: 3.5`` or NaN left a session ``running`` forever
 and ``views: 100000000`` blocked the orchestrator's event loop."""
 
 from __future__ import annotations

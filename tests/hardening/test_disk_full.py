@@ -1,6 +1,6 @@
-"""Issue 17 #11: a full disk ends the session ``failed`` with the reason on disk; nothing is swallowed.
+"""A full disk ends the session ``failed`` with the reason on disk; nothing is swallowed.
 
-Before: the failure path itself raised (``OSError`` from writing the journal), so the journal stayed
+Why: the failure path itself raised (``OSError`` from writing the journal), so the journal stayed
 ``running``; the MCAP recorder logged write errors and went on as if recording; ``model.ply`` was renamed
 from a fixed temporary name without fsync. The disk is a real one: a 4 MB tmpfs mounted for the test (root
 needed; skipped with the reason otherwise)."""

@@ -1,6 +1,6 @@
-"""Issue 17 #9: hostile payloads must not hold the e-stop.
+"""Hostile payloads must not hold the e-stop.
 
-Before: every payload was decoded on the service's event loop with no budget, so three 5 MB payloads of
+Why: every payload was decoded on the service's event loop with no budget, so three 5 MB payloads of
 tiny msgpack arrays sent to ``arm/state`` kept the arm from answering ``stop`` for 25 s. Now each key has a
 byte and element budget checked before (or early in) parsing, large payloads are decoded off the loop and
 ``stop``/health are never refused by the bound on requests in progress.

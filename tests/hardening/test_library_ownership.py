@@ -1,6 +1,6 @@
-"""Issue 17 #2: a model library never deletes what it did not create.
+"""A model library never deletes what it did not create.
 
-Before: ``ModelLibrary(path)`` on any folder created ``entries/``, ``.staging/``, ``.trash/`` there and its
+Why: ``ModelLibrary(path)`` on any folder created ``entries/``, ``.staging/``, ``.trash/`` there and its
 tidy-up removed whatever it found in them, so the orchestrator's ``run`` parameter ``library`` let a network
 request delete folders.
 """

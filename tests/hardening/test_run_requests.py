@@ -1,7 +1,7 @@
-"""Issue 17 #3 and #4 through the real orchestrator process: a ``run`` request with a bad config or a path
+"""Through the real orchestrator process: a ``run`` request with a bad config or a path
 outside the configured roots gets a typed error, nothing is created, and the service keeps answering.
 
-Before: ``views: 3.5`` or NaN were accepted (the session stayed ``running`` forever), ``views: 100000000``
+Why: ``views: 3.5`` or NaN were accepted (the session stayed ``running`` forever), ``views: 100000000``
 blocked the event loop, and ``out``/``resume``/``library`` were taken as given (the folder was created
 before anything was checked; ``library`` let a request tidy any folder)."""
 

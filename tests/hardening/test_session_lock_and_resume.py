@@ -1,6 +1,6 @@
-"""Issue 17 #5 (resume of a finished or failed session) and #8 (one orchestrator per session folder).
+"""Resume of a finished or failed session, and one orchestrator per session folder.
 
-Before: resuming a ``done`` or ``failed`` session returned without publishing any status, so ``objscan scan
+Why: resuming a ``done`` or ``failed`` session returned without publishing any status, so ``objscan scan
 --resume`` waited forever (and the summary of a failed run tells users to resume it); two orchestrators could
 work on one folder at once, and ``write_ply`` used one fixed temporary name, so two writers collided."""
 

@@ -1,7 +1,8 @@
-"""Issue 17 #6 and #7: a journal written before every irreversible step, and a resume that knows what the
+"""A journal written before every irreversible step, and a resume that knows what the
 arm holds.
 
-Before: (#6) a resume's first command opened the gripper, dropping a held object; (#7) a kill during a
+Why: a resume's first command opened the gripper, dropping a held
+object; a kill during a
 re-scan (old view folder moved aside, journal not yet saved) made the resume fail, and a kill right after a
 turn finished physically, before it was journalled, made the resume turn the object again."""
 

@@ -1,6 +1,6 @@
-"""Issue 17 #13: two ``objscan scan`` runs on one machine do not share a cell.
+"""Two ``objscan scan`` runs on one machine do not share a cell.
 
-Before: the second run found the first's cell on the default port and used it (same router, orchestrator and
+Why: the second run found the first's cell on the default port and used it (same router, orchestrator and
 status key); when the first exited it stopped that cell and the second acquisition ended ``stopped``
 mid-view. Now a cell started by ``objscan scan`` is locked by it and a second run starts a private one."""
 

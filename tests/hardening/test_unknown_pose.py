@@ -1,6 +1,6 @@
-"""Issue 17 #12: a frame whose camera pose is unknown is refused downstream.
+"""A frame whose camera pose is unknown is refused downstream.
 
-Before: a real camera whose pose query failed stamped the identity (``pose_source=unknown``) and the
+Why: a real camera whose pose query failed stamped the identity (``pose_source=unknown``) and the
 orchestrator stored it as a scan and registration placed it at the base origin. Now the orchestrator's
 ``Cell`` captures again and then refuses with ``no_camera_pose``, and static registration refuses such a
 frame (from the wire or read back from a session folder)."""

@@ -1,27 +1,22 @@
-"""``objscan models`` and ``objscan report`` as a user runs them (the command modules' parsers and run())."""
+"""``objscan models`` and ``objscan report`` as a user runs them (the CLI's entry point, in-process)."""
 
 from __future__ import annotations
 
-import argparse
 import json
 
 import numpy as np
 import open3d as o3d
 import pytest
 
-from services.cli import cmd_models, cmd_report
+from services.cli.main import main
 from services.library import ModelLibrary
 from services.library.descriptors import synthetic_views
 from tests.library.helpers import FAST_DESCRIPTORS, box_surface
 
 
 def objscan(*argv: str) -> int:
-    parser = argparse.ArgumentParser(prog="objscan")
-    sub = parser.add_subparsers(dest="command", required=True)
-    cmd_models.register(sub)
-    cmd_report.register(sub)
-    args = parser.parse_args(list(argv))
-    return args.func(args)
+    """The command as the CLI runs it: a failure is its one line on stderr and its exit code."""
+    return main(list(argv))
 
 
 @pytest.fixture
@@ -80,6 +75,6 @@ def test_find_ranks_the_same_shape_and_print_first(library, tmp_path, capsys):
 
 def test_report_command_on_a_missing_session_exits_2(tmp_path, capsys):
     assert objscan("report", str(tmp_path / "none")) == 2
-    assert "bad_session" in capsys.readouterr().err
+    assert "[path_not_found]" in capsys.readouterr().err
 
 

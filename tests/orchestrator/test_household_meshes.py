@@ -1,4 +1,4 @@
-"""``objscan scan --object PATH`` on household shapes that ended in a generic failure before (issue 16 item 3):
+"""``objscan scan --object PATH`` on household shapes that must not end in a generic failure:
 a squat 8 cm can, a flat 4 cm box and a 21 cm tall box, written with open3d primitives here (no data files).
 Each acquisition must complete or end with a reason naming the limit (reach, gripper stroke, no
 collision-free grasp, grasps that did not hold), never a generic or internal failure. Real processes over

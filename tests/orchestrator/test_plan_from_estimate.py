@@ -1,4 +1,4 @@
-"""The acquisition plans its scan poses from the object's *estimated* centre (issue 15 item 2): the locate
+"""The acquisition plans its scan poses from the object's *estimated* centre: the locate
 frame's static registration for view 0, the latest registered view after; never from where the object was
 expected (the workspace centre) when the estimate says otherwise."""
 

@@ -5,12 +5,14 @@ the same turn set down at another spot can. Real grasp planner, real arm kinemat
 from __future__ import annotations
 
 import asyncio
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from common.api import GraspPlanReply, ViewResult
-from common.messages import PointCloud
+from common.messages import Plane, PointCloud
+from services.arm.drivers.sim import SimArmDriver
 from services.arm.kinematics import Kinematics
 from services.grasp.planner import plan_grasps
 from services.grasp.service import GraspService
@@ -122,3 +124,31 @@ def test_only_grasps_along_one_direction_are_yaw_tied():
     _, _, milk = reach._plan("auto")  # a 7 x 7 cm carton: grasps across both pairs of faces
     assert not yaw_tied(milk.to_messages())
     assert not yaw_tied([])
+
+
+def _tall_box_view() -> ViewResult:
+    """A registered view of a milk-carton-sized box (7 x 7 x 19 cm) standing at (0.60, 0), turned -30 deg, as the
+    twin's static stage gave it: its direct -30 deg turns fail, and the relocated set-downs on offer include a
+    spot where no set of scan poses around a box that tall is reachable."""
+    d = np.load(Path(__file__).parent / "data" / "tall_box_view.npz")
+    table = Plane(normal=d["table_normal"], offset=float(d["table_offset"]), center=d["table_center"])
+    return ViewResult(view=1, cloud=PointCloud(xyz=d["xyz"], normals=d["normals"]), table=table,
+                      center=d["center"], height=float(d["height"]), scan_poses=np.zeros((0, 4, 4)))
+
+
+@pytest.mark.slow  # every chain of the turn is dry-run on the real kinematics: about a minute
+def test_a_relocated_set_down_never_leaves_the_object_where_it_cannot_be_scanned(kin, tmp_path):
+    view = _tall_box_view()
+    store = SessionStore(tmp_path)
+    store.save_view(view)
+    plan = plan_grasps(view.cloud.xyz, view.cloud.normals, view.table, GraspService.planner_config())
+    cell = ArmOnlyCell(np.asarray(SimArmDriver(send=lambda q, o: None).config.initial_q, float), kin)
+    acq = Acquisition(cell, store, AcquisitionConfig(views=3))  # type: ignore[arg-type]
+    acq.j.update(view=1, state="turn", turns_deg=[0.0, -30.0], turn_direction=-1,
+                 centers={"1": view.center.tolist()}, heights={"1": view.height})
+    acq._plan = GraspPlanReply(grasps=plan.to_messages(), rejections={}, explanation=plan.explain(), seconds=0.0)
+    nxt = asyncio.run(acq.turn())
+    if nxt == State.SCAN:  # turned and set down somewhere: the next view's scan poses must reach it there
+        assert asyncio.run(acq._reachable_scan_set(2)), acq.j.centers.get("2")
+    else:  # nothing safe here: the machine moves on to the next strategy instead
+        assert nxt == State.PLAN_GRASP and acq.j.grasp_mode == "top_down"

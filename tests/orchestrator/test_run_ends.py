@@ -1,6 +1,6 @@
 """Whatever goes wrong, ``Acquisition.run`` ends with a status a user can read: a failure at the very start
 (the cell's first command refused, or a bug) marks the session ``failed`` with the reason, parks the arm and
-persists the journal; it never leaves the session ``running`` forever (the CI hang of session 2: a resumed
+persists the journal; it never leaves the session ``running`` forever (a CI run once hung this way: a resumed
 orchestrator's first gripper command was refused with 'another motion is running' outside the guarded loop)."""
 
 from __future__ import annotations

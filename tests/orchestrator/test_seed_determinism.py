@@ -1,4 +1,4 @@
-"""The same seed gives the same physics session, idle or under load (issue 16: "deterministic for a seed").
+"""The same seed gives the same physics session, idle or under load.
 
 Two short ``objscan scan --physics mujoco`` runs of the thin cream-cheese box with one seed, the second with
 a CPU hog beside it: every decision the orchestrator journalled (grasps checked and executed, relocations,

@@ -87,3 +87,31 @@ def test_a_corrupted_view_is_left_out_and_the_model_stays_at_the_true_pose_fusio
     clean = milk_scan.views  # the true-pose fusion of the twelve uncorrupted views
     floor = evaluate_model(fuse(clean, oracle_poses(clean, gt), model.voxel).xyz, gt, align=True, init_T=np.eye(4))
     assert fig["chamfer_mm"] <= 1.3 * floor["chamfer_mm"], (fig["chamfer_mm"], floor["chamfer_mm"])
+
+
+def test_when_no_two_views_agree_none_is_left_out_and_the_model_is_not_accepted():
+    """Four views whose every turn is implausible (a 90-degree step against a 30-degree window): the outlier
+    test flags them all. Nothing is left to register them against, so none is dropped; the model says why."""
+    from common.geometry import make_transform, rotation_about_axis
+    from services.registration.dynamic.configurations import AcceptCriteria, ConfigurationOutcome, shortfalls
+    from services.registration.dynamic.outliers import handle_outlier_views
+    from services.registration.dynamic.pair import PairResult
+    from services.registration.dynamic.preprocess import preprocess
+
+    scan = synthetic_views_cached(4)
+    prep = preprocess(list(scan.views))
+    turn = make_transform(rotation_about_axis([0, 0, 1], np.radians(90.0)), np.zeros(3))
+    results = [PairResult(k, (k + 1) % 4, k, turn, 0.5, 0.001, 0.5, "turn4dof", "full", 0.1) for k in range(4)]
+    poses = [np.eye(4) for _ in range(4)]
+    out = handle_outlier_views(prep, poses, results, OutlierConfig())
+    assert out.no_majority and out.outliers == [0, 1, 2, 3] and out.left_out == []
+    outcome = ConfigurationOutcome(name="turn4dof", results=results, combined=None,  # type: ignore[arg-type]
+                                   loop={"rotation_deg": 0.0, "translation_mm": 0.0},
+                                   consistency={"min_posed_fitness": 1.0}, seconds=0.0, outliers=out)
+    assert any("no two views agree" in why for why in shortfalls(outcome, AcceptCriteria()))
+
+
+def synthetic_views_cached(views: int):
+    from bench.synthetic import synthetic_views
+
+    return synthetic_views("milk", views=views, scans_per_view=1, profile="ideal", seed=0, voxel=0.003)

@@ -1,5 +1,5 @@
-"""The same scans give bit-identical static registrations (issue 16: a physics session is deterministic for a
-seed). Open3D 0.20 parallelises on TBB, which ignores ``OMP_NUM_THREADS``: with its default threads the RGB-D
+"""The same scans give bit-identical static registrations, so a physics session is deterministic for
+a seed. Open3D 0.20 parallelises on TBB, which ignores ``OMP_NUM_THREADS``: with its default threads the RGB-D
 odometry's scan poses differed in their last bits call to call (measured), and a physics session amplified
 those bits into other grasps and set-downs. ``common/open3d_threads.py`` bounds Open3D's threads."""
 

@@ -1,4 +1,4 @@
-"""The default static profile on the ``realistic`` twin (issue 15): the arm's prior is 1-3 mm / 0.3-1 deg off
+"""The default static profile on the ``realistic`` twin: the arm's prior is 1-3 mm / 0.3-1 deg off
 per scan, and the RGB-D odometry must still converge to the scans' true relative poses.
 
 The view below is the one ``objscan bench static --quick`` measures for orange_juice (seed 13): with the

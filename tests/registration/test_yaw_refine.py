@@ -1,5 +1,5 @@
 """The fast pair path holds the yaw of a textured can: the 1-D yaw search about the turn axis (``yaw_refine``)
-after the colour ICP, scored by colour agreement (issue 15 item 3).
+after the colour ICP, scored by colour agreement.
 
 Geometry leaves a can's yaw about its axis free; the colour ICP settled 2-7 degrees off, always to the same
 side, so 11 edges added up to a 26-degree open loop on the realistic twin and the automatic choice never

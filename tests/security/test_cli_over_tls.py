@@ -1,4 +1,4 @@
-"""The CLI honours --connect and the TLS variables (issue 13 item 6): ``objscan capture`` reaches a TLS-only
+"""The CLI honours --connect and the TLS variables: ``objscan capture`` reaches a TLS-only
 cell with the identity the environment names, and cannot without it."""
 
 from __future__ import annotations

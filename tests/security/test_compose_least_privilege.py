@@ -56,8 +56,12 @@ def _allowed_mounts(name: str, cell: str) -> dict[str, tuple[str, str]]:
     allowed: dict[str, tuple[str, str]] = {}
     if name == "orchestrator":  # the only writer of sessions (journal, frames, recording) and the library
         allowed |= {"/data/sessions": ("./sessions", "rw"), "/data/models": ("./models", "rw")}
+    if name == "sim":  # the user's object meshes: read, never written
+        allowed |= {"/objects": ("./objects", "ro")}
     if "real" in cell and name == "camera":
         allowed |= {"/dev/bus/usb": (INTEL_USB, "rw"), "/config/calibration": ("./calibration", "ro")}
+    if "real" in cell and name == "ros2":  # the ROS 2 face reads the hand-eye file for /tf_static
+        allowed |= {"/config/calibration": ("./calibration", "ro")}
     if "real" in cell and name == "arm":
         allowed |= {"/config/robot.yaml": (ENV["OBJSCAN_ROBOT_CONFIG_FILE"], "ro")}
     if "tls" in cell:

@@ -1,4 +1,4 @@
-"""Secure-by-default compose (issue 17 item 1) and the real-cell override (issue 13 item 6).
+"""Secure-by-default compose and the real-cell override.
 
 No docker engine here: the files are read and merged the way ``docker compose`` does
 (tests/support/compose.py). Before the fix the router was published as ``7447:7447/tcp`` in plain TCP

@@ -65,6 +65,8 @@ def test_the_twin_answers_the_same_for_etc_and_a_missing_path(service_group, tmp
     # the twin keeps serving after the refusals
     state = request_sync(service_group.session, keys.sim(ROBOT, "world"), Request(params={"op": "state"}))
     assert state.info["object"] == "carton"
+    # the demo objects need no configuration: by name, whatever the twin was started with
+    assert _reset(service_group, "flat_box").info["object"] == "flat_box"
 
 
 def test_roots_are_the_hope_folder_the_object_folders_and_the_start_mesh(tmp_path, monkeypatch):

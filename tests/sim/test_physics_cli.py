@@ -6,13 +6,14 @@ from __future__ import annotations
 import pytest
 
 from services.cli.main import build_parser
+from services.cli.scan_config import scan_config
 from services.orchestrator.config import AcquisitionConfig
 
 
 def test_scan_defaults_to_mujoco_physics_and_accepts_geometric():
     p = build_parser()
-    assert p.parse_args(["scan", "--object", "milk"]).physics == "mujoco"
-    assert p.parse_args(["scan", "--physics", "geometric"]).physics == "geometric"
+    assert scan_config(p.parse_args(["scan", "--object", "milk"])).physics == "mujoco"
+    assert scan_config(p.parse_args(["scan", "--physics", "geometric"])).physics == "geometric"
     with pytest.raises(SystemExit):
         p.parse_args(["scan", "--physics", "bullet"])
 

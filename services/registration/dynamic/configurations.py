@@ -115,6 +115,9 @@ def shortfalls(outcome: ConfigurationOutcome, criteria: AcceptCriteria) -> list[
             out.append(f"loop closure {trans:.1f} mm > {criteria.max_loop_translation_mm:g} mm")
     else:
         o = outcome.outliers
+        if o.no_majority:
+            out.append(f"no two views agree ({len(o.outliers)} of {len(o.fitness)} fail the outlier test): "
+                       "the wrong ones cannot be told from the rest")
         left = [d["view"] for d in o.left_out]
         if len(left) > criteria.max_views_left_out:
             out.append(f"{len(left)} views left out ({left}) > {criteria.max_views_left_out}")

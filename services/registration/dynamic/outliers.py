@@ -74,6 +74,9 @@ class OutlierOutcome:
     reregistered: list[dict] = field(default_factory=list)
     left_out: list[dict] = field(default_factory=list)
     implausible_edges: list[dict] = field(default_factory=list)
+    # fewer than two views passed the test: which ones are wrong cannot be told, so none is left out and the
+    # model is not accepted (``configurations.shortfalls``)
+    no_majority: bool = False
 
     @property
     def left_out_positions(self) -> set[int]:
@@ -83,7 +86,7 @@ class OutlierOutcome:
         fitness = [None if f != f else round(float(f), 4) for f in self.fitness]  # None: left out (JSON has no NaN)
         return {"consensus_fitness": fitness, "threshold": round(self.threshold, 4),
                 "outliers": list(self.outliers), "reregistered": self.reregistered, "left_out": self.left_out,
-                "implausible_edges": self.implausible_edges}
+                "implausible_edges": self.implausible_edges, "no_majority": self.no_majority}
 
 
 def edge_correction_deg(result: PairResult) -> float:
@@ -157,6 +160,8 @@ def _reregister(prep: Prepared, poses: list[np.ndarray], k: int, members: list[i
     a perfect turn; ICP from there finds the turn error. Kept when the pose is plausible (within the turn
     window of that neighbour) and the view then passes the outlier test."""
     others = [j for j in members if j != k]
+    if not others:  # nothing else is left to register it against: it stays out
+        return None, {"tried": [], "why": "no other view to register against"}
     target = Cloud(np.vstack([clouds[j].xyz for j in others]), np.vstack([clouds[j].rgb for j in others]),
                    np.vstack([clouds[j].normals for j in others])).to_o3d()
     tree = cKDTree(np.asarray(target.points))
@@ -206,6 +211,9 @@ def handle_outlier_views(prep: Prepared, poses: list[np.ndarray], results: list[
     if not cfg.enabled or not flagged:
         return out
     kept = [k for k in members if k not in flagged]
+    if len(kept) < 2:  # no two views agree: nothing to tell the wrong ones from
+        out.no_majority = True
+        return out
     for k in flagged:  # index order: the same session gives the same decisions
         pose, info = _reregister(prep, poses, k, kept + [k], clouds, threshold, cfg)
         record = {"view": prep.views[k].index, "position": k, "consensus_fitness": round(fit[k], 4),

@@ -43,7 +43,7 @@ class StaticConfig:
     # iterations: 9 of 48 realistic scan pairs > 1 mm (worst 25.9 mm), 3 of 48 (worst 8.0 mm) with 16 + 16,
     # for ~0.12 CPU-s more per pair (the coarse levels are cheap; the full-resolution level stays at one)
     odometry_iterations: tuple[int, ...] = (16, 16, 1)  # per pyramid level, coarse to fine
-    # Reverse seed pass (issue 15): before the forward odometry (scan j onto scan 0), the reverse one (scan 0
+    # Reverse seed pass: before the forward odometry (scan j onto scan 0), the reverse one (scan 0
     # onto scan j) from the inverted prior, on images decimated by a further ``odometry_seed_step``; its
     # inverse seeds the forward run. From a prior several mm off the forward run can stall in a nearby
     # minimum while the reverse one, whose correspondences come from the other image, does not: realistic

@@ -134,7 +134,7 @@ def reverse_seed(src: PriorScan, tgt: PriorScan, prior: np.ndarray, cfg: StaticC
     Why: the two directions take their correspondences from different images, so they stall in different
     places; from a prior several mm off the forward run alone stopped in a nearby minimum on 3 of 12 milk
     pairs (up to 8 mm) where the reverse run reached the true one's basin, and the forward run from there
-    converges (docs/static-registration.md, BENCHMARKS.md "session 6")."""
+    converges (docs/static-registration.md, step 3)."""
     if cfg.odometry_seed_iterations is None:
         return prior
     (src_img, intrinsic), (tgt_img, _) = src.seed_image, tgt.seed_image

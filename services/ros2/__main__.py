@@ -1,0 +1,3 @@
+from services.ros2.service import main
+
+main()
