@@ -296,6 +296,14 @@ def solve_turns(n: int, edges: list[Edge], closing: Edge | None, direction: str,
     closes, closing_info = loop_closes(n, closing, cfg)
     all_edges = list(edges) + ([closing] if closing is not None else [])
     neighbours = {e.i: e for e in edges if e.j == e.i + 1 and not e.wraps}
+    if step_deg is not None:
+        chain = [(open_direction_sign(direction, open_direction, edges)) * abs(step_deg)] * (n - 1)
+    else:
+        chain = list(open_turns) if open_turns is not None else [neighbours[k].best for k in range(n - 1)]
+    if closes and closing is not None:
+        partial = partial_turn(chain, closing, cfg)
+        if partial:
+            closes, closing_info = False, {**closing_info, "why": partial}
     signs = [1, -1] if direction == "unknown" else [1 if direction == "ccw" else -1]
     sig_step = step_sigma_deg if step_sigma_deg is not None else cfg.step_sigma_deg
     reasons: list[str] = []
@@ -322,16 +330,8 @@ def solve_turns(n: int, edges: list[Edge], closing: Edge | None, direction: str,
                 if b - a < cfg.direction_margin:
                     reasons.append(f"the turns do not tell the direction: a full turn either way fits them "
                                    f"about as well (costs {costs})")
-    if closes and sol is not None:
-        angles = list(sol.angles) + [360.0 * sol.winding]
-    else:
-        if step_deg is not None:
-            s = signs[0] if len(signs) == 1 else (
-                (1 if open_direction == "ccw" else -1) if open_direction in ("ccw", "cw") else _open_sign(edges))
-            angles = [s * abs(step_deg) * k for k in range(n)]
-        else:
-            turns = open_turns if open_turns is not None else [neighbours[k].best for k in range(n - 1)]
-            angles = [0.0] + list(np.cumsum(turns))
+    loop_solved = closes and sol is not None
+    angles = list(sol.angles) + [360.0 * sol.winding] if loop_solved else [0.0] + list(np.cumsum(chain))
     turns = [float(angles[k + 1] - angles[k]) for k in range(n - 1)]
     if step_deg is not None:  # the step stands within its stated uncertainty, whatever the estimates say
         sgn = 1.0 if sum(turns) >= 0 else -1.0
@@ -341,19 +341,25 @@ def solve_turns(n: int, edges: list[Edge], closing: Edge | None, direction: str,
     if closing_turn is not None:
         closing_info["solved_deg"] = round(closing_turn, 2)
     edge_rows, unsure, disagree = [], [], []
+    open_sign = float(np.sign(sum(turns)))  # the way the object turns (0: no way to tell)
     used = sol.edges if sol is not None else []
     index = {id(e): q for q, e in enumerate(used)}
     for e in all_edges:
         q = index.get(id(e))
         edge_rows.append(_edge_json(e, sol, q))
-        if e.j != (e.i + 1) % n:
-            continue  # further pairs support the neighbours; the neighbours are what is judged
+        if e.j != (e.i + 1) % n or (e.wraps and not closes):
+            continue  # further pairs (and an open sequence's closing pair) support the neighbours, which are judged
         why = []
-        # a look-alike turn the solved loop rules out (only one alternative fits it) is resolved; a sweep with
-        # look-alikes all round is not, whatever fits
+        # a look-alike turn the solved loop rules out (only one alternative fits it) is resolved; without a loop,
+        # one the other way is no alternative (the object turns one way); a sweep with look-alikes all round
+        # is not resolved, whatever fits
         flat = len(e.candidates) > 1 + cfg.max_lookalikes
-        if e.ambiguous and (flat or q is None or sol is None or sol.fitting[q] != 1):
-            why.append(f"{e.ambiguous}; {len(e.candidates) - 1} look-alike turns in all" if flat else e.ambiguous)
+        ahead = [c for c, _ in e.candidates[1:] if c * open_sign > -cfg.backward_tolerance_deg]
+        unresolved = bool(ahead) if sol is None else (q is None or sol.fitting[q] != 1)
+        if e.ambiguous and (flat or unresolved):
+            why.append(f"{e.ambiguous}; {len(e.candidates) - 1} look-alike turns in all" if flat else
+                       e.ambiguous if sol is not None or ahead[0] == e.candidates[1][0] else
+                       f"look-alike turn: {ahead[0]:+.0f} deg scores nearly as well (symmetric or low-texture object)")
         if e.fitness < cfg.min_fitness:
             why.append(f"little overlap (fitness {e.fitness:.2f} < {cfg.min_fitness})")
         target = (cum[e.j] - cum[e.i]) if not e.wraps else closing_turn
@@ -393,8 +399,10 @@ def solve_turns(n: int, edges: list[Edge], closing: Edge | None, direction: str,
         if amb > cfg.max_ambiguous * max(1, n_turns):
             reasons.append(f"{amb} of {n_turns} turns have a look-alike turn: the object does not tell its turn "
                            "(symmetric or low texture)")
+        # "almost nothing": no more than the closing pair's own tolerance (a full turn's mean step, 360/n, says
+        # nothing about a sequence that is not one)
         if not closes and closing is not None and closing.fitness >= cfg.closing_min_fitness \
-                and abs(sum(turns)) <= cfg.closing_max_steps * 360.0 / n:
+                and abs(sum(turns)) <= cfg.closing_tolerance_deg:
             reasons.append(f"the last view overlaps the first and the turns add up to only {sum(turns):+.0f} deg: "
                            "the object did not turn, or its turns cannot be seen (symmetric or low texture)")
         if not closes and unsure:
@@ -409,6 +417,34 @@ def solve_turns(n: int, edges: list[Edge], closing: Edge | None, direction: str,
         status = "unsure"
     total = float(sum(turns)) + (closing_turn or 0.0)
     return LoopVerdict(status, cum, turns, closes, closing_info, total, unsure, disagree, reasons, edge_rows, costs)
+
+
+def partial_turn(chain: list[float], closing: Edge, cfg: TurnGraphConfig) -> str:
+    """Why the sequence is a partial turn whose last view still overlaps the first, or "" when it is not.
+
+    The closing pair measures the turn from the last view back to the first. When the turns as they are
+    (``chain``, not wrapped) put the last view within half a turn of the first and the closing pair finds it
+    right there (within ``closing_tolerance_deg``), the views simply span that much: the object did not come
+    back to its start. A full turn would need the chain to be wrong by a whole turn, and solving it as one
+    loads the missing turn onto a few pairs (a box's look-alike sides make that fit). A full turn's chain
+    ends near +-360 minus one step, so its closing pair is never explained this way."""
+    span = float(np.sum(chain))
+    if abs(span) >= 180.0:
+        return ""
+    off = closing.best + span  # the closing pair measures minus the span when the views simply span it
+    if abs(off) > cfg.closing_tolerance_deg:
+        return ""
+    return (f"the last view matches the first at {closing.best:+.0f} deg, where the turns put it "
+            f"({-span:+.0f} deg): a partial turn of {span:+.0f} deg, not a full one")
+
+
+def open_direction_sign(direction: str, open_direction: str | None, edges: list[Edge]) -> int:
+    """The sign of an open sequence's turns: the given direction, else the caller's, else the estimates'."""
+    if direction in ("ccw", "cw"):
+        return 1 if direction == "ccw" else -1
+    if open_direction in ("ccw", "cw"):
+        return 1 if open_direction == "ccw" else -1
+    return _open_sign(edges)
 
 
 def _open_sign(edges: list[Edge]) -> int:

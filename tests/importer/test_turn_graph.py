@@ -159,3 +159,24 @@ def test_a_full_turn_open_by_a_focal_length_bias_still_closes():
     assert plan.loop.loop_closes and plan.status == "closed", plan.loop.reasons
     assert plan.direction == "cw" and plan.total_turn_deg == pytest.approx(-360.0, abs=1e-6)
     assert np.all(np.abs(np.diff(plan.cumulative_deg) - est) < 3.0)
+
+
+def test_a_partial_turn_whose_last_view_still_overlaps_the_first_is_open_not_held_into_a_loop():
+    """Five views of a hand-turned box ~15 degrees apart (the pattern castard's first five frames give): the
+    last view overlaps the first, at just the turn the estimates add up to, and the box's sides look alike
+    half a turn away. The views span 60 degrees: the sequence is open with its estimated turns, not solved as
+    a full turn that puts the missing 300 degrees on a few pairs (held at 150 degrees), and the look-alikes
+    the other way round are no alternative."""
+    near = [1.0, 0.95]
+    neigh = [_search([-8.0, 172.5], heights=near), _search([-17.2, 165.0], heights=near), _search(-12.7),
+             _search(-22.4)]
+    further = {(0, 2): _search(-24.3), (1, 3): _search(-29.8), (2, 4): _search(-35.3),
+               (3, 0): _search([37.8, -142.5], heights=near), (4, 1): _search(52.5)}
+    plan = plan_turns(neigh, None, "unknown", closing=_search([60.6, -120.0], heights=near, fitness=0.85),
+                      further=further)
+    turns = np.diff(plan.cumulative_deg)
+    assert not plan.loop.loop_closes and "partial turn" in plan.loop.closing["why"]
+    assert plan.status == "open" and plan.direction == "cw", plan.loop.reasons
+    assert np.allclose(turns, [-8.0, -17.2, -12.7, -22.4], atol=1.0), turns
+    assert plan.total_turn_deg == pytest.approx(-60.3, abs=1.0)
+    assert not plan.loop.unsure_pairs
