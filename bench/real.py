@@ -107,10 +107,10 @@ def run_sequence(name: str, source: Path, intrinsics: str | None, quick: bool, o
                    configuration=model["configuration"], min_posed_fitness=model["consistency"]["min_posed_fitness"],
                    model_points=model["points"])
         if picture:
-            row["picture"] = str(_picture(model_dir / "model.ply", model_dir / "model.png"))
+            row["picture"] = _picture(model_dir / "model.ply", model_dir / "model.png").name
     row["status"], row["reason"] = judge(row)
     row.update(import_seconds=round(t_import, 1), total_seconds=round(time.perf_counter() - t0, 1),
-               session=str(session), imported=imp)
+               session=session.name, imported=imp)  # by name: the folder is this machine's
     return row
 
 
@@ -227,6 +227,8 @@ def variants(quick: bool, out_root: Path = OUT) -> dict[str, dict[str, Any]]:
         out[name] = {"loop_deg": row.get("loop_deg"), "worst_view_agreement": row.get("worst_view_agreement"),
                      "status": row["status"], **row}
         print(f"{name}: {row['status']} ({row.get('reason', '')})", flush=True)
+        # a long run keeps what it has: the rows so far, beside the sessions (the result is written at the end)
+        (out_root / "variants_so_far.json").write_text(json.dumps(out, indent=1, default=float))
     return out
 
 
