@@ -11,6 +11,8 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+from rich.markup import escape
+
 from services.cli.cmd_scan import console
 from services.cli.outcome import BadUsage, print_json, require_path
 
@@ -31,6 +33,9 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--turn-step", type=_turn_step, default=None,
                    help="degrees the object turns between frames (a turntable's step); 'none' or omitted: "
                         "estimate every turn")
+    p.add_argument("--turn-step-uncertainty", type=float, default=None,
+                   help="the given step's uncertainty in degrees (default 2): a pair estimate further off the step "
+                        "does not move a turn, and the model's turns are judged against it")
     p.add_argument("--direction", choices=["ccw", "cw", "unknown"], default="unknown",
                    help="turn direction seen from above (default: unknown, both are tried)")
     p.add_argument("--every", type=int, default=1,
@@ -60,7 +65,8 @@ def run(args) -> int:  # noqa: ANN001
         base = BaseFrameConfig() if args.camera_up is None else BaseFrameConfig(
             camera_up=tuple(float(v) for v in args.camera_up.split(",")))
         cfg = ImportConfig(turn_step_deg=args.turn_step, direction=args.direction, every=args.every,
-                           depth_scale=args.depth_scale, object_name=args.object, base=base)
+                           depth_scale=args.depth_scale, object_name=args.object, base=base,
+                           turn_step_sigma_deg=args.turn_step_uncertainty)
         if args.max_frames is not None:
             cfg = replace(cfg, max_frames=args.max_frames)
         if args.no_focal_calibration:
@@ -82,6 +88,14 @@ def run(args) -> int:  # noqa: ANN001
     console.print(f"session: {args.out}; {report['views']} views of {report['frames']} frames; turns {t['source']}, "
                   f"direction {t['direction']} ({t['direction_source']}); camera "
                   f"{report['base_frame']['camera_height_m'] * 100:.1f} cm above the table; {report['seconds']:.1f} s")
+    loop = t.get("loop", {})
+    if report.get("skipped_count"):
+        console.print(f"skipped: {report['skipped_count']} frames (one warning line each above)")
+    console.print(f"turns: {t['status']}; loop {'closes' if loop.get('loop_closes') else 'open'}, total turn "
+                  f"{loop.get('total_turn_deg')} deg" + (f"; {len(loop['unsure_pairs'])} unsure pairs"
+                                                         if loop.get("unsure_pairs") else ""))
+    for why in loop.get("reasons", []):
+        console.print(f"[yellow]unsure:[/yellow] {escape(why)}")
     console.print(f"focal length: {'x ' + format(fc['scale'], '.4f') if fc['applied'] else 'kept'} "
                   f"(fx {fc['fx_before']} -> {fc['fx_after']}): {fc['reason']}")
     return 0

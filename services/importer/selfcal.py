@@ -33,9 +33,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import open3d as o3d
 
-from common.geometry import invert, yaw_deg_about
+from common.geometry import invert, make_transform, yaw_deg_about
 from common.messages import Intrinsics
-from services.registration.api import DynamicView, TurnResult, project_to_turn
+from services.registration.api import DynamicView, TurnResult, known_turn, project_to_turn
 
 reg = o3d.pipelines.registration
 
@@ -55,6 +55,7 @@ class FocalSearchConfig:
     min_gain_deg: float = 1.0  # apply only when the loop closes better by at least this much
     voxel: float = 0.002  # m
     icp_distances: tuple[float, ...] = (0.006, 0.003, 0.0015)  # m, coarse to fine
+    prior_agreement_deg: float = 10.0  # a pair search further than this from its solved turn is not a prior
 
     def __post_init__(self) -> None:
         lo, hi = self.scale_range
@@ -104,11 +105,19 @@ def rescale_points(xyz_base: np.ndarray, T_base_camera: np.ndarray, s: float) ->
     return pc @ T_base_camera[:3, :3].T + T_base_camera[:3, 3]
 
 
+def solved_prior(target: DynamicView, source: DynamicView, axis: np.ndarray, turn_deg: float) -> np.ndarray:
+    """View ``source`` onto ``target`` for an object turned by ``turn_deg`` between them: centres stacked on the
+    table, then the turn undone about the axis through the target's centre."""
+    shift = np.asarray(target.center, np.float64) - np.asarray(source.center, np.float64)
+    shift -= float(shift @ axis) * axis
+    return known_turn(axis, np.asarray(target.center, np.float64), -turn_deg, np.zeros(3)) @ make_transform(None, shift)
+
+
 class LoopProbe:
     """The signed loop yaw of a turn sequence for any focal scale ``s`` (see the module doc)."""
 
     def __init__(self, views: list[DynamicView], T_base_camera: np.ndarray, searches: list[TurnResult],
-                 config: FocalSearchConfig) -> None:
+                 config: FocalSearchConfig, turns_deg: list[float] | None = None) -> None:
         if len(searches) != len(views) - 1 or len(views) < 3:
             raise ValueError("one turn search per neighbour pair, at least 3 views")
         self.cfg = config
@@ -117,6 +126,9 @@ class LoopProbe:
         self.xyz = [np.asarray(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(
             np.asarray(v.xyz, np.float64))).voxel_down_sample(config.voxel).points) for v in views]
         self.priors = [np.asarray(r.T, dtype=np.float64) for r in searches]  # view k+1 onto view k
+        for k, turn in enumerate(turns_deg or []):  # a search the solved loop overruled starts from the solved turn
+            if abs((-searches[k].yaw_deg - turn + 180.0) % 360.0 - 180.0) > config.prior_agreement_deg:
+                self.priors[k] = solved_prior(views[k], views[k + 1], self.axis, turn)
 
     def _cloud(self, k: int, s: float) -> o3d.geometry.PointCloud:
         p = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(rescale_points(self.xyz[k], self.T_bc, s)))
@@ -149,18 +161,27 @@ class LoopProbe:
 
 def calibrate_focal(views: list[DynamicView], T_base_camera: np.ndarray, searches: list[TurnResult],
                     total_turn_deg: float, intrinsics: Intrinsics | None,
-                    config: FocalSearchConfig | None = None) -> FocalCalibration:
-    """The focal scale that closes the loop of a full-turn sequence, or ``scale=1`` and why not."""
+                    config: FocalSearchConfig | None = None, turns_deg: list[float] | None = None,
+                    loop_closes: bool | None = None) -> FocalCalibration:
+    """The focal scale that closes the loop of a full-turn sequence, or ``scale=1`` and why not.
+
+    ``total_turn_deg`` and ``loop_closes`` come from the solved loop (``turn_graph``: the last view overlaps
+    the first, the turns add up to a full turn), not from the summed pair estimates, which under-count when a
+    pair is wrong; ``turns_deg`` (the solved neighbour turns) seed the pairs whose search they overruled."""
     cfg = config or FocalSearchConfig()
     t0 = time.perf_counter()
     fx = intrinsics.fx if intrinsics is not None else None
     if not cfg.enabled:
         return FocalCalibration(1.0, False, "switched off", fx_before=fx, fx_after=fx)
+    if loop_closes is False:
+        return FocalCalibration(1.0, False, "the solved turns do not close a loop (the last view does not come "
+                                "back to the first): no loop to close", total_turn_deg=total_turn_deg,
+                                fx_before=fx, fx_after=fx)
     if abs(total_turn_deg) < cfg.min_turn_deg:
         return FocalCalibration(1.0, False, f"the sequence turns {abs(total_turn_deg):.0f} deg, not a full turn "
                                 f"(>= {cfg.min_turn_deg:.0f}): no loop to close", total_turn_deg=total_turn_deg,
                                 fx_before=fx, fx_after=fx)
-    probe = LoopProbe(views, T_base_camera, searches, cfg)
+    probe = LoopProbe(views, T_base_camera, searches, cfg, turns_deg)
     evals = [probe.evaluate(1.0)]
     base = evals[0]
     if base["closing_fitness"] < cfg.min_closing_fitness:

@@ -2,8 +2,9 @@
 
 The session is what ``objscan reconstruct`` reads: one view per frame (``view_KK/scan_0``) with the fixed
 camera's pose in the table-based ``base``, and ``session.json`` with the cumulative turns (given or
-estimated) and an ``import`` block saying how they were found. A frame whose object cannot be isolated
-(``no_object``, ``empty_depth``) is left out and named in the report.
+estimated) and an ``import`` block saying how they were found. A frame that cannot be read (no partner,
+unreadable, not aligned) or whose object cannot be isolated (``no_object``, ``empty_depth``) is left out with a
+one-line warning and named in the report (``skipped``, ``skipped_count``).
 """
 
 from __future__ import annotations
@@ -21,8 +22,9 @@ from common.session_folder import new_folder_refusal, write_scan, write_session
 from services.importer.base_frame import BaseFrameConfig, estimate_base_frame
 from services.importer.errors import ImportError_, OutNotEmpty
 from services.importer.selfcal import FocalSearchConfig, calibrate_focal, scale_intrinsics
-from services.importer.sources import MAX_FRAMES, read_frames
-from services.importer.turns import DIRECTIONS, pair_searches, plan_turns
+from services.importer.sources import MAX_FRAMES, log, read_frames, skip
+from services.importer.turn_graph import TurnGraphConfig
+from services.importer.turns import DIRECTIONS, graph_searches, pair_searches, plan_turns
 from services.registration.api import StaticConfig, TurnSearchConfig, register_view, view_from_static
 
 
@@ -31,6 +33,8 @@ class ImportConfig:
     """What the user knows about the sequence; everything else is estimated."""
 
     turn_step_deg: float | None = None  # None: estimate each turn
+    # the given step's stated uncertainty (deg): estimates further off do not move a turn (None: the graph's)
+    turn_step_sigma_deg: float | None = None
     direction: str = "unknown"  # "ccw" | "cw" (seen from above) | "unknown": try both
     every: int = 1  # keep one frame in this many (a 30 fps recording of a slow turntable), applied while reading
     max_frames: int = MAX_FRAMES  # frames kept at most (they are held until the turns are found)
@@ -39,10 +43,13 @@ class ImportConfig:
     base: BaseFrameConfig = field(default_factory=BaseFrameConfig)
     turn_search: TurnSearchConfig = field(default_factory=TurnSearchConfig)
     focal: FocalSearchConfig = field(default_factory=FocalSearchConfig)  # self-calibration of fx, fy
+    graph: TurnGraphConfig = field(default_factory=TurnGraphConfig)  # the view graph and the loop (turn_graph)
 
     def __post_init__(self) -> None:
         if self.direction not in DIRECTIONS:
             raise ValueError(f"direction must be one of {DIRECTIONS}, got {self.direction!r}")
+        if self.turn_step_sigma_deg is not None and not (0 < self.turn_step_sigma_deg < 90):
+            raise ValueError(f"turn_step_sigma_deg must be in (0, 90), got {self.turn_step_sigma_deg}")
         if self.turn_step_deg is not None and not (0 < abs(self.turn_step_deg) < 180):
             raise ValueError(f"turn_step_deg must be in (0, 180), got {self.turn_step_deg}")
         if self.every < 1:
@@ -65,31 +72,43 @@ def import_sequence(source: str | Path, out_dir: str | Path, intrinsics: Intrins
     t0 = time.perf_counter()
     out = Path(out_dir)
     _check_out(out)
-    frames = read_frames(source, intrinsics, cfg.depth_scale, cfg.every, cfg.max_frames)
+    skipped: list[dict] = []  # frames left out (read: unpaired, unreadable; isolate: no object), one warning each
+    frames = read_frames(source, intrinsics, cfg.depth_scale, cfg.every, cfg.max_frames, skipped)
     say({"stage": "read", "frames": len(frames), "seconds": round(time.perf_counter() - t0, 2)})
     base = estimate_base_frame(frames, cfg.base, st)
     say({"stage": "base_frame", "camera_height_m": round(base.camera_height_m, 4),
          "look_down_deg": round(base.look_down_deg, 1)})
-    kept, views, skipped = [], [], []
-    for k, f in enumerate(frames):
+    kept, views = [], []
+    for f in frames:
         f.T_base_camera = base.T_base_camera.copy()
         try:
             res = register_view([f], st)
         except ObjscanError as exc:
-            skipped.append({"frame": k, "seq": f.seq, "code": exc.code, "message": exc.message})
+            skip(skipped, f.seq, exc.code, exc.message, stage="isolate")
             continue
         kept.append(f)
         views.append(view_from_static(res, 0.0, index=len(views)))
-        say({"stage": "isolate", "frame": k, "of": len(frames), "points": len(res.object_cloud)})
+        say({"stage": "isolate", "frame": f.seq, "of": len(frames), "points": len(res.object_cloud)})
+    if skipped:
+        log.warning("%d frames skipped in all; %d views imported", len(skipped), len(views))
     if len(views) < 3:
-        raise ImportError_("fewer than 3 frames show an object standing on the table", code="too_few_views",
-                           detail={"kept": len(views), "skipped": skipped[:10]})
+        raise ImportError_(f"fewer than 3 frames show an object standing on the table ({len(skipped)} skipped)",
+                           code="too_few_views", detail={"kept": len(views), "skipped": skipped[:10]})
     searches = pair_searches(views, cfg.turn_search)
-    plan = plan_turns(searches, cfg.turn_step_deg, cfg.direction)
-    say({"stage": "turns", "source": plan.source, "direction": plan.direction,
+    closing, further = graph_searches(views, cfg.graph.reach, cfg.turn_search)
+    plan = plan_turns(searches, cfg.turn_step_deg, cfg.direction, closing, further, cfg.turn_step_sigma_deg,
+                      cfg.graph)
+    loop = plan.loop
+    assert loop is not None
+    say({"stage": "turns", "source": plan.source, "direction": plan.direction, "status": plan.status,
+         "total_turn_deg": round(plan.total_turn_deg, 1),
          "median_turn_deg": round(float(np.median(np.abs(plan.pair_yaw_deg))), 2)})
-    calib = calibrate_focal(views, base.T_base_camera, searches, float(np.sum(plan.pair_yaw_deg)),
-                            kept[0].intrinsics, cfg.focal)
+    for pair in loop.unsure_pairs:
+        log.warning("turn %d -> %d unsure: %s", pair["from"], pair["to"], pair["why"])
+    for why in loop.reasons:
+        log.warning("turns unsure: %s", why)
+    calib = calibrate_focal(views, base.T_base_camera, searches, plan.total_turn_deg, kept[0].intrinsics,
+                            cfg.focal, turns_deg=list(np.diff(plan.cumulative_deg)), loop_closes=loop.loop_closes)
     if calib.applied:  # the written frames carry the corrected intrinsics; the table is fitted again with them
         for f in frames:
             f.intrinsics = scale_intrinsics(f.intrinsics, calib.scale)
@@ -106,19 +125,23 @@ def import_sequence(source: str | Path, out_dir: str | Path, intrinsics: Intrins
         "frames": len(frames),
         "views": len(kept),
         "skipped": skipped,
+        "skipped_count": len(skipped),
         "base_frame": base.to_json(),
         "turns": plan.to_json(),
         "focal_calibration": calib.to_json(),
         "seconds": round(time.perf_counter() - t0, 3),
     }
-    write_session(out, {
+    session = {
         "object": cfg.object_name,
         "profile": "imported",
         "camera": "fixed",  # reconstruct: every view differs by a turn on the one table (pair.turn_only)
         "views": [{"index": k, "commanded_turn_deg": round(c, 4), "turn_source": plan.source}
                   for k, c in enumerate(plan.cumulative_deg)],
         "import": report,
-    })
+    }
+    if cfg.turn_step_deg is not None:  # a turntable's step: the model's turns are judged against it
+        session["turn_accuracy_deg"] = cfg.turn_step_sigma_deg or cfg.graph.step_sigma_deg
+    write_session(out, session)
     return report
 
 

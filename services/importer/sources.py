@@ -7,10 +7,16 @@ by the last number in the names, in that number's order = the turn order); intri
 Frames are streamed: ``--every`` is applied while reading (a folder decodes only the pairs it keeps, a
 recording reads past the others without aligning or copying them), and at most ``max_frames`` are kept, so a long
 recording or folder never sits in memory whole (``too_many_frames`` says which ``--every`` would fit).
+
+A folder need not be perfect: an image without its partner (a depth stream recorded longer than the colour),
+an unreadable image, a depth image of another size than its colour image, are skipped with a one-line warning
+each (logger ``objscan.import``) and listed in ``skipped``; then one line gives the count. Only a folder with
+fewer than ``MIN_FRAMES`` usable frames is refused (``no_frames``, with the count).
 """
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -23,6 +29,16 @@ from services.camera.png_folder.frames import FrameFolderError
 from services.importer.errors import ImportError_
 
 RECORDING_SUFFIXES = (".bag", ".db3")
+MIN_FRAMES = 3  # a sequence with fewer usable frames has no turn to tell
+log = logging.getLogger("objscan.import")
+
+
+def skip(skipped: list[dict] | None, frame: int, code: str, message: str, stage: str = "read") -> None:
+    """Record a frame left out (``skipped``) and say so in one warning line."""
+    entry = {"stage": stage, "frame": int(frame), "code": code, "message": message}
+    if skipped is not None:
+        skipped.append(entry)
+    log.warning("frame %d skipped (%s): %s", frame, code, " ".join(message.split()))
 
 
 @contextmanager
@@ -40,10 +56,15 @@ def parse_intrinsics(text: str, width: int = 0, height: int = 0) -> Intrinsics:
         return frames.parse_intrinsics(text, width, height)
 
 
-def pair_images(folder: Path) -> list[tuple[int, Path, Path]]:
-    """(number, color, depth) for every numbered pair, in number order."""
+def pair_images(folder: Path, skipped: list[dict] | None = None) -> list[tuple[int, Path, Path]]:
+    """(number, color, depth) for every numbered pair, in number order; an image without a partner is
+    skipped (``skip``), not a refusal."""
     with _as_import_error():
-        return frames.pair_images(folder)
+        pairs, lonely = frames.match_images(folder)
+    for n, has in lonely:
+        missing = "depth" if has == "color" else "color"
+        skip(skipped, n, "unpaired_frames", f"{has} image without its {missing} image")
+    return pairs
 
 
 #: Frames an import keeps at most (after ``every``): about 1.5 MB each at 640 x 480, all held until the table
@@ -64,21 +85,24 @@ def _too_many(kept_at_least: int, every: int, max_frames: int, total: int | None
 
 
 def read_folder(folder: Path, intrinsics: Intrinsics | None, depth_scale: float, every: int = 1,
-                max_frames: int | None = None) -> Iterator[RGBDFrame]:
+                max_frames: int | None = None, skipped: list[dict] | None = None) -> Iterator[RGBDFrame]:
     """The kept frames (one pair in ``every``) of an image folder, in turn order, decoded one at a time;
     the base pose is left as identity (set later). More than ``max_frames`` kept is refused before any
-    image is decoded."""
+    image is decoded. Unpaired and unreadable images are skipped (``skip``)."""
     with _as_import_error():
         intrinsics = frames.folder_intrinsics(folder, intrinsics)
     if not (depth_scale > 0 and np.isfinite(depth_scale)):
         raise ImportError_("depth_scale must be positive", code="bad_value", detail={"depth_scale": depth_scale})
-    pairs = pair_images(folder)
+    pairs = pair_images(folder, skipped)
     kept = pairs[::every]
     if max_frames is not None and len(kept) > max_frames:
         raise _too_many(len(kept), every, max_frames, total=len(pairs))
     for n, cpath, dpath in kept:
-        with _as_import_error():
+        try:
             frame = frames.read_pair(n, cpath, dpath, intrinsics, depth_scale)
+        except FrameFolderError as exc:
+            skip(skipped, n, exc.code, exc.message)
+            continue
         yield frame
 
 
@@ -118,7 +142,8 @@ def read_recording(path: Path, every: int = 1) -> Iterator[RGBDFrame]:
 
 
 def iter_frames(source: str | Path, intrinsics: Intrinsics | None = None, depth_scale: float = 0.001,
-                every: int = 1, max_frames: int | None = MAX_FRAMES) -> Iterator[RGBDFrame]:
+                every: int = 1, max_frames: int | None = MAX_FRAMES,
+                skipped: list[dict] | None = None) -> Iterator[RGBDFrame]:
     """The frames of ``source`` (folder or recording) to keep, one in ``every``, as they are read: a skipped
     frame is never decoded (folder) or never aligned or copied (recording), so no frame beyond those kept
     is held."""
@@ -126,7 +151,7 @@ def iter_frames(source: str | Path, intrinsics: Intrinsics | None = None, depth_
         raise ImportError_("every must be at least 1", code="bad_value", detail={"every": repr(every)[:40]})
     src = Path(source)
     if src.is_dir():
-        yield from read_folder(src, intrinsics, depth_scale, every, max_frames)
+        yield from read_folder(src, intrinsics, depth_scale, every, max_frames, skipped)
     elif src.is_file() and src.suffix.lower() in RECORDING_SUFFIXES:
         for kept, frame in enumerate(read_recording(src, every), start=1):  # only kept frames are aligned, copied
             if max_frames is not None and kept > max_frames:
@@ -139,10 +164,19 @@ def iter_frames(source: str | Path, intrinsics: Intrinsics | None = None, depth_
 
 
 def read_frames(source: str | Path, intrinsics: Intrinsics | None = None, depth_scale: float = 0.001,
-                every: int = 1, max_frames: int | None = MAX_FRAMES) -> list[RGBDFrame]:
+                every: int = 1, max_frames: int | None = MAX_FRAMES,
+                skipped: list[dict] | None = None) -> list[RGBDFrame]:
     """The frames of ``source`` (folder or recording) to import, keeping one in ``every`` while reading
-    (``iter_frames``); at least 3."""
-    frames = list(iter_frames(source, intrinsics, depth_scale, every, max_frames))
-    if len(frames) < 3:
-        raise ImportError_(f"a sequence needs at least 3 frames, found {len(frames)}", code="no_frames")
+    (``iter_frames``); the frames left out are appended to ``skipped`` and counted in one warning line.
+    At least ``MIN_FRAMES`` usable ones (``no_frames`` otherwise, with the counts)."""
+    skipped = [] if skipped is None else skipped
+    before = len(skipped)
+    frames = list(iter_frames(source, intrinsics, depth_scale, every, max_frames, skipped))
+    left_out = len(skipped) - before
+    if left_out:
+        log.warning("%d of %d frames skipped; %d usable", left_out, left_out + len(frames), len(frames))
+    if len(frames) < MIN_FRAMES:
+        raise ImportError_(f"a sequence needs at least {MIN_FRAMES} usable frames, found {len(frames)}"
+                           + (f" ({left_out} skipped)" if left_out else ""), code="no_frames",
+                           detail={"usable": len(frames), "skipped": left_out, "frames_skipped": skipped[before:][:20]})
     return frames

@@ -27,6 +27,7 @@ from services.registration.api import session_dynamic_config
 from services.registration.cloud import write_ply
 from services.registration.dynamic.model import MapPairs, build_model
 from services.registration.dynamic.pair import register_pair
+from services.registration.dynamic.turns import imported_turn_misses
 from services.registration.dynamic.views import view_from_static
 from services.registration.static import StaticConfig, StaticViewResult, register_view
 from services.registration.static.pose_errors import prior_pose_errors, relative_pose_errors
@@ -242,6 +243,9 @@ def run_dynamic_stage(
         return {"error": {"code": exc.code, "message": exc.message, "detail": exc.detail},
                 "views_used": order, "seconds": round(time.perf_counter() - t0, 4)}
     ply = model.write_ply(Path(out_dir) / "model.ply")
+    unsure = imported_turn_misses(session.data)  # an unsure import never yields an accepted model
+    if unsure:
+        model.accepted, model.why = False, "; ".join([m for m in (model.why,) if m] + unsure)
     report["accepted"], report["why"] = model.accepted, model.why
     figures = model.to_json()
     figures.update({"ply": str(ply.relative_to(out_dir)), "views_used": order, "turn_only": cfg.pair.turn_only,

@@ -36,6 +36,8 @@ class TurntableSpec:
     camera_height: float = 0.16  # m above the table (a D4xx on a small tripod)
     noise: bool = True  # the D435 sensor model (realistic depth noise, dropouts, colour noise)
     seed: int = 0
+    # a hand turn: each view's angle off ``step * k`` by a normal draw of this sigma (deg; view 0 stays at 0)
+    turn_jitter_deg: float = 0.0
     width: int = 640
     height: int = 480
 
@@ -43,8 +45,20 @@ class TurntableSpec:
         if self.views < 2 or not 0 < abs(self.step_deg) < 180:
             raise SimInputError("a turntable needs >= 2 views and a step in (0, 180) deg", code="bad_value",
                                 detail={"views": self.views, "step_deg": self.step_deg})
+        if not 0 <= self.turn_jitter_deg < abs(self.step_deg) / 2:
+            raise SimInputError("turn_jitter_deg must be in [0, step / 2): the views must stay in turn order",
+                                code="bad_value", detail={"turn_jitter_deg": self.turn_jitter_deg})
         if self.camera_distance <= 0.1 or self.camera_height <= 0:
             raise SimInputError("the camera must stand > 0.1 m away, above the table", code="bad_value")
+
+
+def turn_angles(spec: TurntableSpec) -> list[float]:
+    """Each view's angle (deg): ``step * k``, off by the hand-turn jitter (its own generator, so the sensor
+    noise's draws are the same with and without it)."""
+    rng = np.random.default_rng(spec.seed + 7907)
+    jitter = rng.normal(0.0, spec.turn_jitter_deg, spec.views) if spec.turn_jitter_deg > 0 else np.zeros(spec.views)
+    jitter[0] = 0.0
+    return [float(spec.step_deg * k + jitter[k]) for k in range(spec.views)]
 
 
 def turntable_frames(spec: TurntableSpec) -> tuple[Intrinsics, np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
@@ -56,8 +70,8 @@ def turntable_frames(spec: TurntableSpec) -> tuple[Intrinsics, np.ndarray, list[
     T_base_camera = look_at(eye, centre)
     rng = np.random.default_rng(spec.seed)
     frames = []
-    for k in range(spec.views):
-        scene = RenderScene(obj, default_object_pose(yaw_deg=spec.step_deg * k), table=TableSpec())
+    for yaw in turn_angles(spec):
+        scene = RenderScene(obj, default_object_pose(yaw_deg=yaw), table=TableSpec())
         res = render(scene, T_base_camera, K, noise=D435Noise() if spec.noise else None, rng=rng)
         frames.append((res.color, res.depth))
     return K, T_base_camera, frames
@@ -76,4 +90,4 @@ def render_turntable(spec: TurntableSpec, out_dir: str | Path, written_focal_sca
     written = {"fx": K.fx * written_focal_scale, "fy": K.fy * written_focal_scale, "cx": K.cx, "cy": K.cy}
     (out / "intrinsics.json").write_text(json.dumps(written))
     return {"intrinsics": K.as_dict(), "written_intrinsics": written, "T_base_camera": T_base_camera.tolist(),
-            "turns_deg": [spec.step_deg * k for k in range(spec.views)]}
+            "turns_deg": turn_angles(spec)}

@@ -36,7 +36,8 @@ def test_castard_imports_with_base_from_the_table_and_the_direction_found(tmp_pa
     sup = turns["direction_support"]
     assert sup["cw_score"] > sup["ccw_score"]
     session = read_session(out)
-    assert [v["commanded_turn_deg"] for v in session.views][:3] == [0.0, -38.0, -76.0]
+    # the step is a prior: each turn stays within its stated uncertainty (default 2 degrees) of it
+    assert np.allclose([v["commanded_turn_deg"] for v in session.views][:3], [0.0, -38.0, -76.0], atol=4.0 + 1e-6)
     f = read_scan(out, 3, 0)
     assert f.meta["pose_source"] == "table_plane"
     # base: z up along the table normal, the camera ~12 cm above the table top (z = 0)
@@ -76,9 +77,9 @@ def test_folder_layouts_and_errors(tmp_path):
     frames = read_frames(tmp_path)
     assert len(frames) == 3 and frames[0].intrinsics.width == 6
     Image.fromarray(depth).save(tmp_path / "depth_11.png")
-    with pytest.raises(ImportError_) as exc:
-        read_frames(tmp_path)
-    assert exc.value.code == "unpaired_frames" and exc.value.detail["numbers"] == [11]
+    skipped: list[dict] = []
+    assert [f.seq for f in read_frames(tmp_path, skipped=skipped)] == [1, 2, 10]  # the lone depth is skipped
+    assert [(s["frame"], s["code"]) for s in skipped] == [(11, "unpaired_frames")]
     with pytest.raises(ImportError_) as exc:
         read_frames(tmp_path / "nowhere.mp4")
     assert exc.value.code == "bad_source"

@@ -62,3 +62,35 @@ def test_the_twin_turntable_recovers_the_true_focal_length(tmp_path, written):
     from common.session_folder import read_scan
 
     assert read_scan(tmp_path / "session", 0, 0).intrinsics.fx == pytest.approx(fc["fx_after"], rel=1e-6)
+
+
+def test_the_full_turn_is_the_solved_loops_not_the_summed_estimates():
+    """Estimates that sum to 36 degrees do not stop the calibration of a loop the graph solved to 360; a loop
+    the graph found open stops it whatever the sum says."""
+    K = Intrinsics(width=640, height=480, fx=600.0, fy=600.0, cx=320.0, cy=240.0)
+    opened = calibrate_focal([], np.eye(4), [], total_turn_deg=360.0, intrinsics=K, loop_closes=False)
+    assert not opened.applied and "do not close a loop" in opened.reason
+    with pytest.raises(ValueError):  # past the gate (no views to probe here): the solved loop let it through
+        calibrate_focal([], np.eye(4), [], total_turn_deg=360.0, intrinsics=K, loop_closes=True)
+
+
+def test_a_pair_the_loop_overruled_starts_from_its_solved_turn():
+    """``solved_prior``: the later view put back onto the earlier one by the solved turn about the table normal
+    through the earlier view's centre (the centres stacked on the table first)."""
+    from common.messages import Plane
+    from services.importer.selfcal import solved_prior
+    from services.registration.api import DynamicView, known_turn
+
+    rng = np.random.default_rng(1)
+    axis = np.array([0.0, 0.0, 1.0])
+    pts = rng.uniform(-0.04, 0.04, (500, 3)) + [0.5, 0.1, 0.06]
+    c0 = pts.mean(axis=0)
+    T_turn = known_turn(axis, c0, 40.0, np.array([0.01, -0.02, 0.0]))  # the object turned 40 deg and slid
+    moved = pts @ T_turn[:3, :3].T + T_turn[:3, 3]
+    table = Plane(normal=axis.tolist(), offset=0.0, center=[0.5, 0.1, 0.0])
+    rgb = np.zeros((500, 3), np.uint8)
+    a = DynamicView(pts, rgb, table, c0, 0.0)
+    b = DynamicView(moved, rgb, table, moved.mean(axis=0), 0.0)
+    T = solved_prior(a, b, axis, 40.0)
+    back = moved @ T[:3, :3].T + T[:3, 3]
+    assert np.allclose(back, pts, atol=1e-9)

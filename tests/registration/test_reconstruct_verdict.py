@@ -129,3 +129,28 @@ def test_scan_prints_and_records_the_orchestrators_verdict(tmp_path, capsys):
     assert _summary_json({**final, "accepted": True, "why": ""}, tmp_path, 1.0) == 0
     captured = capsys.readouterr()
     assert json.loads(captured.out)["accepted"] is True and "NOT accepted" not in captured.err
+
+
+def test_a_model_of_an_unsure_import_is_never_accepted(four_view_session, tmp_path, monkeypatch, capsys):
+    """The same session, as an import whose turns were found unsure (look-alike turns): a model that would be
+    accepted on its own figures says it is not, and why."""
+    import shutil
+
+    import services.registration.dynamic.model as model
+    from services.registration.dynamic.turns import TurnCheck
+
+    _criteria(monkeypatch, max_loop_rotation_deg=360.0, max_loop_translation_mm=1e6, min_posed_fitness=0.0)
+    monkeypatch.setattr(model, "check_turns", lambda *a, **k: TurnCheck([], [], 0.0, []))
+    session = tmp_path / "imported"
+    shutil.copytree(four_view_session, session)
+    doc = json.loads((session / "session.json").read_text())
+    doc["import"] = {"turns": {"status": "unsure", "loop": {
+        "reasons": ["3 of 4 turns have a look-alike turn: the object does not tell its turn"],
+        "unsure_pairs": [{"from": 0, "to": 1, "why": "look-alike turn"}]}}}
+    (session / "session.json").write_text(json.dumps(doc))
+    out = tmp_path / "out"
+    assert main(["reconstruct", str(session), "--out", str(out), "--threads", "1", "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["accepted"] is False
+    assert "imported turns are unsure" in res["why"] and "look-alike" in res["why"] and "0->1" in res["why"]
+    assert json.loads((out / "report.json").read_text())["model"]["accepted"] is False

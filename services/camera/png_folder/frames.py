@@ -73,8 +73,9 @@ def _images(folder: Path) -> list[Path]:
     return sorted(f for f in folder.iterdir() if f.is_file() and f.suffix.lower() in IMAGE_SUFFIXES)
 
 
-def pair_images(folder: Path) -> list[tuple[int, Path, Path]]:
-    """(number, color, depth) for every numbered pair, in number order."""
+def match_images(folder: Path) -> tuple[list[tuple[int, Path, Path]], list[tuple[int, str]]]:
+    """(number, color, depth) for every numbered pair, in number order, and the numbers of the images with no
+    partner (``(n, "color" | "depth")``: the one that is there). ``no_frames`` when nothing pairs."""
     if not folder.is_dir():
         raise FrameFolderError(f"{folder} is not a folder", code="no_frames", detail={"folder": str(folder)})
     sub_color = next((folder / n for n in ("rgb", "color", "colour") if (folder / n).is_dir()), None)
@@ -90,11 +91,18 @@ def pair_images(folder: Path) -> list[tuple[int, Path, Path]]:
                                detail={"color": len(colors), "depth": len(depths),
                                        "layouts": ["rgb/NAME{N}.png + depth/NAME{N}.png",
                                                    "color_{N}.png + depth_{N}.png in one folder"]})
-    lonely = sorted(set(colors) ^ set(depths))
+    lonely = [(n, "color" if n in colors else "depth") for n in sorted(set(colors) ^ set(depths))]
+    return [(n, colors[n], depths[n]) for n in common], lonely
+
+
+def pair_images(folder: Path) -> list[tuple[int, Path, Path]]:
+    """(number, color, depth) for every numbered pair, in number order; ``unpaired_frames`` when an image has
+    no partner (a camera replaying the folder must not drop frames silently)."""
+    pairs, lonely = match_images(folder)
     if lonely:
         raise FrameFolderError("some images have no partner (color without depth or the reverse)",
-                               code="unpaired_frames", detail={"numbers": lonely[:20]})
-    return [(n, colors[n], depths[n]) for n in common]
+                               code="unpaired_frames", detail={"numbers": [n for n, _ in lonely][:20]})
+    return pairs
 
 
 def read_pair(n: int, cpath: Path, dpath: Path, intrinsics: Intrinsics, depth_scale: float) -> RGBDFrame:

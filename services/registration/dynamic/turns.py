@@ -72,3 +72,18 @@ def check_turns(poses: list[np.ndarray], axis: np.ndarray, kept: list[int], sigm
         misses.append(f"the views do not go round the object once: their turns add up to {total:+.0f} deg off "
                       "the commanded ones (views stacked on one side, a turn not observable from the shape)")
     return TurnCheck(corr, edges, total, misses)
+
+
+def imported_turn_misses(session_data: dict) -> list[str]:
+    """Why a model of an imported sequence cannot be accepted whatever its own figures: the import found its
+    turns unsure (look-alike turns of a symmetric or low-texture object, little overlap, estimates the loop
+    contradicts; ``importer/turn_graph.py``). A model built on unsure turns may fit itself perfectly with
+    its views stacked wrongly, so it must say so instead of claiming to be right."""
+    turns = (session_data.get("import") or {}).get("turns") or {}
+    if turns.get("status") != "unsure":
+        return []
+    loop = turns.get("loop") or {}
+    reasons = loop.get("reasons") or ["the import's turn estimates are unsure"]
+    pairs = [f"{p['from']}->{p['to']}" for p in loop.get("unsure_pairs", [])]
+    tail = f" (unsure pairs {', '.join(pairs[:8])}{', ...' if len(pairs) > 8 else ''})" if pairs else ""
+    return [f"the imported turns are unsure: {'; '.join(reasons)}{tail}"]
