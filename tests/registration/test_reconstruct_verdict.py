@@ -31,11 +31,12 @@ def two_view_session(tmp_path_factory) -> Path:
 def _criteria(monkeypatch, **accept) -> None:
     """Make the dynamic stage's acceptance criteria strict or lenient for this test (the verdict is real: the
     stage still measures the model and compares it with them)."""
-    import services.registration.reconstruct as rec
+    import services.registration.api as api
     from services.registration.dynamic.configurations import AcceptCriteria
-    from services.registration.dynamic.model import DynamicConfig
 
-    monkeypatch.setattr(rec, "DynamicConfig", lambda: replace(DynamicConfig(), accept=AcceptCriteria(**accept)))
+    session_config = api.dynamic_config
+    monkeypatch.setattr(api, "dynamic_config",
+                        lambda d: replace(session_config(d), accept=AcceptCriteria(**accept)))
 
 
 def test_an_unaccepted_model_is_flagged_in_json_report_and_on_stderr(four_view_session, tmp_path, monkeypatch,
