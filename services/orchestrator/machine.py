@@ -58,6 +58,7 @@ from services.orchestrator.planning import (
     scan_pose_candidates,
     turn_sequences,
 )
+from services.orchestrator.recovery import grasp_order, lies_down, plan_mode
 from services.orchestrator.regrasp import (
     RELOCATABLE_STEPS,
     grasp_after,
@@ -495,7 +496,11 @@ class Acquisition:
     async def plan_grasp(self) -> State:
         k = self.view
         view = self.store.load_view(k)
-        mode = self.j.grasp_mode
+        mode = plan_mode(self.j.grasp_mode, self._lying(view.cloud.xyz, view.height), self._slipped_kinds(k))
+        if mode != self.j.grasp_mode:
+            self.decide("planning frontal and top-down grasps alike",
+                        why="the object lies on its side" if self._lying(view.cloud.xyz, view.height)
+                        else "a grasp slipped at this view")
         plan = await self.cell.plan_grasps(view.cloud, view.table, mode)
         self.store.save_json(f"view_{k:02d}/grasps_{mode}.json", {
             "mode": mode, "explanation": plan.explanation, "seconds": plan.seconds, "rejections": plan.rejections,
@@ -514,17 +519,29 @@ class Acquisition:
         self._plan = plan
         return State.TURN
 
-    def _candidates(self, center: np.ndarray, height: float) -> list[tuple[int, Grasp, TurnPoses]]:
+    def _lying(self, xyz: np.ndarray, height: float) -> bool:
+        """The object toppled during this acquisition and now lies on its side (``recovery.lies_down``)."""
+        return self.j.topple_restarts > 0 and lies_down(xyz, height)
+
+    def _slipped_kinds(self, k: int) -> list[str]:
+        """Grasp kinds that slipped at view ``k`` (the re-grasp after a slip tries the others first)."""
+        return [str(e["slipped"]) for e in self.j.regrasps.get(str(k), []) if e.get("slipped")]
+
+    def _candidates(self, center: np.ndarray, height: float, xyz: np.ndarray) -> list[tuple[int, Grasp, TurnPoses]]:
         """Every (grasp, offset, direction) of the plan, likeliest first.
 
-        Radial-ish grasps before side ones (then the planner's rank); within a grasp, once the session has
-        turned one way it keeps turning that way (12 views cover 360 degrees in order); before that, the
-        direction that brings the hand back toward radial goes first, then the planner's offset order.
+        Grasps in ``recovery.grasp_order``: the kind that slipped last, top-down first on a lying object,
+        radial-ish grasps before side ones, the safest hold against the centre of mass, then the planner's
+        rank. Within a grasp, once the session has turned one way it keeps turning that way (12 views cover
+        360 degrees in order); before that, the direction that brings the hand back toward radial goes
+        first, then the planner's offset order.
         """
         assert self._plan is not None
         cfg = self.config
-        offsets = [radial_offset_deg(g, center) for g in self._plan.grasps]
-        order = sorted(range(len(offsets)), key=lambda i: abs(offsets[i]) > 50.0)
+        grasps = list(self._plan.grasps)
+        offsets = [radial_offset_deg(g, center) for g in grasps]
+        order = grasp_order(grasps, self._lying(xyz, height), self._slipped_kinds(self.view), xyz, center, height,
+                            [abs(o) > 50.0 for o in offsets])
         fixed = self.j.turn_direction
         out = []
         for gi in order:
@@ -548,7 +565,12 @@ class Acquisition:
             self.j.counters.slips += 1
             self.j.failed_grasps.setdefault(str(k), []).append(signature)
             self._limits(k).setdefault("grasp", []).append(exc.message.split(":")[0][:40])
-            self.decide("grasp failed", grasp=gi, pose=seq.name, reason=exc.message)
+            height = float(np.asarray(grasp.contacts, float)[:, 2].mean())
+            self.j.regrasps.setdefault(str(k), []).append(
+                {"strategy": "re-grasp after slip", "slipped": grasp.kind, "pose": seq.name,
+                 "contact_height": round(height, 4)})
+            self.decide("grasp failed", grasp=gi, pose=seq.name, reason=exc.message,
+                        next="re-grasp: the other kind first, then lower grasps")
             self._plan = None
             self.j.grasp_mode = "auto"
             return await self._rescan(k, f"grasp failed: {exc.message}")
@@ -605,7 +627,7 @@ class Acquisition:
         failed_before = set(self.j.failed_grasps.get(str(k), []))
         await self.motion.escape(view.center, view.height)
         await self.cell.set_object_box(box_c, box_e)
-        direct = self._candidates(view.center, view.height)
+        direct = self._candidates(view.center, view.height, view.cloud.xyz)
         late: list[tuple[int, Grasp, TurnPoses]] = []  # picks that were reachable; the turn or set-down was not
         relocations = 0
         scannable: dict[tuple, bool] = {}  # relocation spots: can the object be scanned there?
