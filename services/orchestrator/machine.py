@@ -449,8 +449,9 @@ class Acquisition:
         n = self.j.topple_restarts + 1
         if n > self.config.max_topple_restarts:
             raise AcquisitionFailed(f"view {k}: {reason}; it toppled again after {n - 1} restart(s) of the views: "
-                                    "giving up (the object does not stay standing after a set-down)",
-                                    detail={"view": k, "restarts": n - 1})
+                                    "giving up; limit: stability: the object does not stay standing after a "
+                                    f"set-down; recovery tried: {', '.join(self._recoveries_tried(k)) or 'none'}",
+                                    detail={"view": k, "restarts": n - 1, "limit": "stability"})
         self.j.topple_restarts = n
         self.j.counters.topple_restarts = n
         for v in range(k + 1):
