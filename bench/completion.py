@@ -132,7 +132,7 @@ def outcome(journal: dict[str, Any]) -> dict[str, Any]:
     r = re.search(r"recovery tried: ([^;]*)", message)
     out["recoveries_tried"] = [s.strip() for s in r.group(1).split(",")] if r else []
     out["view"] = err.get("view", journal.get("view"))
-    out["message"] = message[:400]
+    out["message"] = re.sub(r"/(?:tmp|work|home|root)/\S*", "<path>", message)[:400]  # no machine's folders
     return out
 
 
