@@ -100,6 +100,28 @@ def test_a_toppled_bottle_lying_on_its_side_is_grasped_across_from_above_and_tur
     assert [m for m in cell.log if not m["dry_run"] and m["error"]] == []
 
 
+@pytest.mark.slow  # about 30 s on a loaded 2-core machine: 200 chains on offer, the look-ahead checks the next turn
+def test_a_bottle_lying_across_the_line_from_the_base_is_grasped_rolled_toward_the_base(kin, tmp_path):
+    """At 0.60 m the wrist cannot point straight down, and across this bottle a top-down grasp's own offsets lean
+    sideways: every chain was unreachable and the view ended "no executable grasp". Rolled about the bottle's
+    axis toward the base, the grasp is reachable and the acquisition turns it."""
+    center = np.array([0.60, 0.0, 0.0])
+    r, length = BOTTLE
+    xyz, normals = cylinder(r, length, 8000, lying_along=np.array([0.0, 1.0, 0.0]), xy=center[:2],
+                            view_from=_cams(center), noise=0.0005)
+    store = SessionStore(tmp_path)
+    store.save_view(_view(xyz, normals, center, 2 * r, 0))
+    cell = PlanningCell(np.asarray(SimArmDriver(send=lambda q, o: None).config.initial_q, float), kin)
+    acq = Acquisition(cell, store, AcquisitionConfig(views=3))  # type: ignore[arg-type]
+    acq.j.update(view=0, state="plan_grasp", topple_restarts=1, centers={"-1": center.tolist(), "0": center.tolist()},
+                 heights={"-1": 2 * r, "0": 2 * r})
+    seen = asyncio.run(_steps(acq, 6))
+    assert seen[-1] == State.SCAN and acq.view == 1 and acq.j.counters.rescans == 0, [d["what"] for d in
+                                                                                       acq.j.decisions]
+    turned = next(d for d in acq.j.decisions if d["what"] == "turned")
+    assert turned["kind"] == "top_down" and "roll" in turned["pose"]
+
+
 def test_after_a_slip_the_regrasp_is_of_the_other_kind_or_lower(kin, tmp_path):
     """A tall bottle standing at the 0.40 m ring: its first grasp slips. The re-grasp (after the re-scan) is
     planned with both kinds and executes a top-down grasp or a lower one, not the same grasp at another angle."""
