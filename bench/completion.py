@@ -103,7 +103,7 @@ def scan(path: Path, out: Path, views: int, seed: int, timeout: float = TIMEOUT_
     env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(REPO))
     cmd = [sys.executable, "-m", "services.cli.main", "scan", "--object", str(path), "--views", str(views),
            "--physics", "mujoco", "--seed", str(seed), "--out", str(out), "--port", str(_free_port()),
-           "--no-record", "--json"]
+           "--no-record", "--json", "--library", str(out.parent / "library")]  # never the user's library
     try:
         proc = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=timeout)
         tail = (proc.stdout + proc.stderr)[-600:]
