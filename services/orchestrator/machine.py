@@ -880,7 +880,9 @@ class Acquisition:
             if closed:
                 await self.cell.gripper(opening, self.config.turn.gripper_force)
             self._record_turn(k, int(intent["direction"]), intent.get("shift"))
-            self.decide("turn had finished before the restart: recorded, not repeated", view=k + 1)
+            self.decide("turn had finished before the restart: recorded, not repeated" if int(intent["direction"])
+                        else "reposition had finished before the restart: recorded, the view is scanned again",
+                        view=self.view)
             return
         if closed:
             if phase == "holding":  # possibly lifted: lower it back onto the table first

@@ -108,3 +108,39 @@ def test_after_the_reposition_the_acquisition_goes_on_with_exact_turns(kin, tmp_
     assert asyncio.run(acq.turn()) == State.SCAN
     assert acq.view == 3 and acq.j.turns_deg == [0.0, 30.0, 60.0, 90.0]
     assert acq.j.counters.repositions == 1  # at the favoured spot: no second reposition
+
+
+class _ReleasedCell:
+    """The arm stands where a reposition released the object (fingers still closed on it)."""
+
+    def __init__(self, T: np.ndarray):
+        self.T = T
+        self.openings: list[float] = []
+
+    async def state(self):  # noqa: ANN201
+        from common.messages import JointState
+
+        return JointState(names=[], position=np.zeros(6), T_base_gripper=self.T, T_base_camera=np.eye(4),
+                          gripper_opening=0.0)
+
+    async def gripper(self, opening: float, force: float = 30.0) -> None:
+        self.openings.append(opening)
+
+
+def test_a_reposition_finished_before_a_restart_is_recorded_not_repeated(tmp_path):
+    store = SessionStore(tmp_path)
+    store.save_view(_view(np.array([0.66, 0.20, 0.0]), 2))
+    release = np.eye(4)
+    release[:3, 3] = [0.6, 0.0, 0.05]
+    cell = _ReleasedCell(release)
+    acq = Acquisition(cell, store, AcquisitionConfig(views=12))  # type: ignore[arg-type]
+    acq.j.update(view=2, state="turn", turns_deg=[0.0, 30.0, 60.0], turn_direction=1,
+                 centers={"2": [0.66, 0.20, 0.0]}, heights={"2": CAN[1]},
+                 turn_intent={"view": 2, "phase": "holding", "direction": NO_TURN, "opening": 0.08,
+                              "shift": [-0.06, -0.20, 0.0], "release_T": release.tolist(),
+                              "center": [0.66, 0.20, 0.0], "height": CAN[1]})
+    asyncio.run(acq._recover_turn())
+    assert cell.openings == [0.08]  # released where it was set down, never moved again
+    assert acq.view == 2 and acq.j.turns_deg == [0.0, 30.0, 60.0] and acq.state == State.SCAN
+    np.testing.assert_allclose(acq.j.centers["2"][:2], [0.60, 0.0], atol=1e-9)
+    assert (tmp_path / "view_02_moved1").is_dir() and acq.j.turn_intent is None
