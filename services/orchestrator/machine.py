@@ -545,7 +545,12 @@ class Acquisition:
 
     def _slipped_kinds(self, k: int) -> list[str]:
         """Grasp kinds that slipped at view ``k`` (the re-grasp after a slip tries the others first)."""
-        return [str(e["slipped"]) for e in self.j.regrasps.get(str(k), []) if e.get("slipped")]
+        return [str(e["slipped"]) for e in self._regrasps_now(k) if e.get("slipped")]
+
+    def _regrasps_now(self, k: int) -> list[dict[str, Any]]:
+        """The strategies journalled at view ``k`` since the views last restarted (a topple restarts them: the
+        view ``k`` of before lay otherwise)."""
+        return [e for e in self.j.regrasps.get(str(k), []) if int(e.get("restart", 0)) == self.j.topple_restarts]
 
     def _candidates(self, center: np.ndarray, height: float, xyz: np.ndarray) -> list[tuple[int, Grasp, TurnPoses]]:
         """Every (grasp, offset, direction) of the plan, likeliest first.
@@ -588,7 +593,7 @@ class Acquisition:
             height = float(np.asarray(grasp.contacts, float)[:, 2].mean())
             self.j.regrasps.setdefault(str(k), []).append(
                 {"strategy": "re-grasp after slip", "slipped": grasp.kind, "pose": seq.name,
-                 "contact_height": round(height, 4)})
+                 "contact_height": round(height, 4), "restart": self.j.topple_restarts})
             self.decide("grasp failed", grasp=gi, pose=seq.name, reason=exc.message,
                         next="re-grasp: the other kind first, then lower grasps")
             self._plan = None
@@ -759,7 +764,7 @@ class Acquisition:
         (``reposition.py``): ``proactive`` when it drifted off every favoured spot, else as the last resort
         of a view where no turn is executable. The next state, or None when no reposition was executed."""
         rc = self.config.turn.relocation
-        done = sum(1 for e in self.j.regrasps.get(str(k), []) if e.get("strategy") == "reposition")
+        done = sum(1 for e in self._regrasps_now(k) if e.get("strategy") == "reposition")
         if not (rc.enabled and rc.reposition) or done >= rc.max_repositions or not chains:
             return None
         spots = favoured_spots(self._workspace_center(), rc)
@@ -841,9 +846,9 @@ class Acquisition:
         d = np.zeros(3) if shift is None else np.asarray(shift, float)
         if str(k) in self.j.centers:
             self.j.centers[str(k)] = (np.asarray(self.j.centers[str(k)], float) + d).tolist()
-        n = 1 + sum(1 for e in self.j.regrasps.get(str(k), []) if e.get("strategy") == "reposition")
+        n = 1 + sum(1 for e in self.j.regrasps.get(str(k), []) if e.get("strategy") == "reposition")  # folder name
         self.j.regrasps.setdefault(str(k), []).append(
-            {"strategy": "reposition", "shift": np.round(d, 4).tolist(),
+            {"strategy": "reposition", "restart": self.j.topple_restarts, "shift": np.round(d, 4).tolist(),
              "to": np.round(np.asarray(self.j.centers.get(str(k), d), float)[:2], 4).tolist()})
         self.j.counters.repositions += 1
         self.j.grasp_mode = "auto"
