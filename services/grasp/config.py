@@ -150,6 +150,8 @@ class GraspPlannerConfig:
     """Back-off of the pre-grasps along the approach; None = the gripper's finger length (0.086 m)."""
     frontal_offsets_deg: tuple[float, ...] = (15.0,)
     top_down_offsets_deg: tuple[float, ...] = (15.0, 30.0, 45.0)
+    top_down_roll_deg: tuple[float, ...] = (30.0, 45.0)
+    """Top-down grasps on a round section also turned about the lying axis by these angles (``roll.py``)."""
     turn_deg: float = 30.0
     """Turn of the object about the table normal; positive = right-handed about the upward normal
     (counter-clockwise seen from above). The paper turns clockwise: use -30 for that."""
@@ -170,7 +172,8 @@ class GraspPlannerConfig:
 
     def __post_init__(self) -> None:
         _check_positive(self, exclude=("gripper", "mode", "pregrasp_distance", "frontal_offsets_deg",
-                                       "top_down_offsets_deg", "turn_deg", "approach_origin", "seed",
+                                       "top_down_offsets_deg", "top_down_roll_deg", "turn_deg", "approach_origin",
+                                       "seed",
                                        "top_down_crop", "cos_beta_offset", "r1_min", "r2_min",
                                        "check_palm", "w1", "w2", "table_clearance", "max_examples"))
         if self.mode not in ("auto", "frontal", "top_down", "both"):

@@ -36,6 +36,7 @@ from services.grasp.errors import GraspInputError
 from services.grasp.poses import frontal_rotation, grasp_poses, top_down_rotation
 from services.grasp.ranking import RankedPair, rank_region_pair
 from services.grasp.result import GraspPlan, PlannedGrasp, Rejections
+from services.grasp.roll import roll_poses, round_section
 
 MIN_POINTS = 10
 
@@ -278,9 +279,14 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
         lowest_level = min(float((b.corners() @ inp.up).min()) for b in level) + inp.offset
         depth = top_down_depth(lowest_level, -float(x @ inp.up), cfg)
         n_pair = np.array([pair.n_j, pair.n_i] if swapped else [pair.n_i, pair.n_j])
-        out.append(_make_grasp("top_down", axis, pair, R, np.array([p_plus, p_minus]), n_pair, inp,
-                               depth, cfg.top_down_offsets_deg, center, cfg, boxes,
-                               inp.inferred(keep[[pair.i, pair.j]])))
+        grasp = _make_grasp("top_down", axis, pair, R, np.array([p_plus, p_minus]), n_pair, inp,
+                            depth, cfg.top_down_offsets_deg, center, cfg, boxes, inp.inferred(keep[[pair.i, pair.j]]))
+        section = round_section(inp.xyz, mid, R[:, 2], inp.up) if cfg.top_down_roll_deg else None
+        if section is not None:  # a round body lying across: the grasp may turn about its axis (roll.py)
+            grasp.poses.update(roll_poses(grasp.poses, R, section[0], cfg.top_down_roll_deg, inp.up, center,
+                                          cfg.turn_deg, np.asarray(cfg.approach_origin, float)))
+            grasp.metrics["section_radius"] = section[1]
+        out.append(grasp)
         slots[(axis, source)] = slots.get((axis, source), 0) + 1
     out.sort(key=_order)
     return out

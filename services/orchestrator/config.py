@@ -119,6 +119,9 @@ class RelocationConfig:
     azimuths_deg: tuple[float, ...] = (0.0, 30.0, -30.0)
     max_checks: int = 40  # relocated chains dry-run per turn, on top of ``TurnMotion.max_checks``
     min_shift: float = 0.02  # m: a spot nearer than this to the object is where it already stands
+    reposition: bool = True  # bring an object that drifted off the favoured spots back (reposition.py)
+    reposition_drift: float = 0.08  # m from every favoured spot before the object is brought back
+    max_repositions: int = 1  # per view: a spot that cannot be turned from after one is not chased further
 
     def __post_init__(self) -> None:
         _flag("turn.relocation.enabled", self.enabled)
@@ -128,6 +131,9 @@ class RelocationConfig:
         self.azimuths_deg = tuple(_numbers("turn.relocation.azimuths_deg", self.azimuths_deg, -90.0, 90.0))
         _number("turn.relocation.max_checks", self.max_checks, 1, 1000, integer=True)
         _number("turn.relocation.min_shift", self.min_shift, 0.0, 0.5)
+        _flag("turn.relocation.reposition", self.reposition)
+        _number("turn.relocation.reposition_drift", self.reposition_drift, 0.0, 1.0)
+        _number("turn.relocation.max_repositions", self.max_repositions, 0, 10, integer=True)
 
 
 @dataclass

@@ -29,6 +29,7 @@ class Counters:
     rescans: int = 0
     topple_restarts: int = 0
     regrasps: int = 0  # regrasp strategies executed (services/orchestrator/regrasp.py)
+    repositions: int = 0  # pick-and-places without a turn back to a favoured spot (reposition.py)
 
     def to_dict(self) -> dict[str, int]:
         return dataclasses.asdict(self)
@@ -61,7 +62,7 @@ class Journal:
     error: dict[str, Any] | None = None
     previous_errors: list[dict[str, Any]] = field(default_factory=list)
     stopped_in: str | None = None  # the state an e-stop interrupted
-    pending_rescan: dict[str, int] | None = None  # a re-scan whose old attempt is being moved aside
+    pending_rescan: dict[str, Any] | None = None  # a re-scan whose old attempt is being moved aside
     turn_intent: dict[str, Any] | None = None  # an open pick-turn-place (phase closing | holding)
     holding: bool = False
     turn_direction: int | None = None  # +1 / -1 once the session has turned one way

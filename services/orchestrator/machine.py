@@ -58,6 +58,7 @@ from services.orchestrator.planning import (
     scan_pose_candidates,
     turn_sequences,
 )
+from services.orchestrator.recovery import grasp_order, lies_down, plan_mode
 from services.orchestrator.regrasp import (
     RELOCATABLE_STEPS,
     grasp_after,
@@ -66,6 +67,7 @@ from services.orchestrator.regrasp import (
     relocation_shifts,
     yaw_tied,
 )
+from services.orchestrator.reposition import NO_TURN, drift, favoured_spots, reposition_shifts, without_turn
 from services.orchestrator.topple import topple_reason
 from services.registration.api import with_turn_accuracy
 from services.session_store import SessionStore
@@ -448,8 +450,9 @@ class Acquisition:
         n = self.j.topple_restarts + 1
         if n > self.config.max_topple_restarts:
             raise AcquisitionFailed(f"view {k}: {reason}; it toppled again after {n - 1} restart(s) of the views: "
-                                    "giving up (the object does not stay standing after a set-down)",
-                                    detail={"view": k, "restarts": n - 1})
+                                    "giving up; limit: stability: the object does not stay standing after a "
+                                    f"set-down; recovery tried: {', '.join(self._recoveries_tried(k)) or 'none'}",
+                                    detail={"view": k, "restarts": n - 1, "limit": "stability"})
         self.j.topple_restarts = n
         self.j.counters.topple_restarts = n
         for v in range(k + 1):
@@ -469,8 +472,10 @@ class Acquisition:
         if n > self.config.max_rescans:
             lim = self.j.limits.get(str(k), {})
             limit = name_limit(lim.get("planner", {}), lim.get("dry_run", []), lim.get("grasp", []))
-            raise AcquisitionFailed(f"view {k}: giving up after {n - 1} re-scans ({reason}); limit: {limit}",
-                                    detail={"view": k, "limit": limit.split(":")[0]})
+            tried = self._recoveries_tried(k)
+            raise AcquisitionFailed(f"view {k}: giving up after {n - 1} re-scans ({reason}); limit: {limit}; "
+                                    f"recovery tried: {', '.join(tried) or 'none'}",
+                                    detail={"view": k, "limit": limit.split(":")[0], "recoveries": tried})
         self.j.rescans[str(k)] = n
         self.j.counters.rescans += 1
         # intent first: a kill between the move and the next journal write must not lose the view's frames
@@ -481,12 +486,28 @@ class Acquisition:
         self.decide("re-scan", reason=reason, rescan=n)
         return State.SCAN
 
+    def _recoveries_tried(self, k: int) -> list[str]:
+        """The recovery strategies this acquisition went through up to view ``k``, in order, once each:
+        re-scans, top-down fallback, relocated set-downs, repositions, re-grasps after slips, topple restarts."""
+        out = ["re-scan"] if self.j.rescans.get(str(k)) else []
+        if any(d.get("what") == "falling back to top-down grasps" and d.get("view") == k for d in self.j.decisions):
+            out.append("top-down grasps")
+        for e in self.j.regrasps.get(str(k), []):
+            if e.get("strategy") and e["strategy"] not in out:
+                out.append(str(e["strategy"]))
+        if any(str(d.get("what", "")).startswith("repositioning") and d.get("view") == k for d in self.j.decisions) \
+                and "reposition" not in out:
+            out.append("reposition (not executable)")
+        if self.j.topple_restarts:
+            out.append(f"restart after topple x{self.j.topple_restarts}")
+        return out
+
     def _finish_rescan(self) -> None:
         """Move the view's old attempt aside (idempotent: a resume calls it again) and clear the intent."""
         pending = self.j.pending_rescan
         k, n = int(pending["view"]), int(pending["attempt"])
         src = view_dir(self.store.path, k)
-        dst = src.with_name(f"{src.name}_attempt{n}")
+        dst = src.with_name(f"{src.name}_{pending.get('aside') or f'attempt{n}'}")
         if src.exists() and not dst.exists():  # keep every captured frame: the old attempt moves aside
             shutil.move(str(src), str(dst))
         self.j.pending_rescan = None
@@ -496,7 +517,11 @@ class Acquisition:
     async def plan_grasp(self) -> State:
         k = self.view
         view = self.store.load_view(k)
-        mode = self.j.grasp_mode
+        mode = plan_mode(self.j.grasp_mode, self._lying(view.cloud.xyz, view.height), self._slipped_kinds(k))
+        if mode != self.j.grasp_mode:
+            self.decide("planning frontal and top-down grasps alike",
+                        why="the object lies on its side" if self._lying(view.cloud.xyz, view.height)
+                        else "a grasp slipped at this view")
         plan = await self.cell.plan_grasps(view.cloud, view.table, mode)
         self.store.save_json(f"view_{k:02d}/grasps_{mode}.json", {
             "mode": mode, "explanation": plan.explanation, "seconds": plan.seconds, "rejections": plan.rejections,
@@ -515,17 +540,34 @@ class Acquisition:
         self._plan = plan
         return State.TURN
 
-    def _candidates(self, center: np.ndarray, height: float) -> list[tuple[int, Grasp, TurnPoses]]:
+    def _lying(self, xyz: np.ndarray, height: float) -> bool:
+        """The object toppled during this acquisition and now lies on its side (``recovery.lies_down``)."""
+        return self.j.topple_restarts > 0 and lies_down(xyz, height)
+
+    def _slipped_kinds(self, k: int) -> list[str]:
+        """Grasp kinds that slipped at view ``k`` (the re-grasp after a slip tries the others first)."""
+        return [str(e["slipped"]) for e in self._regrasps_now(k) if e.get("slipped")]
+
+    def _regrasps_now(self, k: int) -> list[dict[str, Any]]:
+        """The strategies journalled at view ``k`` since the views last restarted (a topple restarts them: the
+        view ``k`` of before lay otherwise)."""
+        return [e for e in self.j.regrasps.get(str(k), []) if int(e.get("restart", 0)) == self.j.topple_restarts]
+
+    def _candidates(self, center: np.ndarray, height: float, xyz: np.ndarray) -> list[tuple[int, Grasp, TurnPoses]]:
         """Every (grasp, offset, direction) of the plan, likeliest first.
 
-        Radial-ish grasps before side ones (then the planner's rank); within a grasp, once the session has
-        turned one way it keeps turning that way (12 views cover 360 degrees in order); before that, the
-        direction that brings the hand back toward radial goes first, then the planner's offset order.
+        Grasps in ``recovery.grasp_order``: the kind that slipped last, top-down first on a lying object,
+        radial-ish grasps before side ones, the safest hold against the centre of mass, then the planner's
+        rank. Within a grasp, once the session has turned one way it keeps turning that way (12 views cover
+        360 degrees in order); before that, the direction that brings the hand back toward radial goes
+        first, then the planner's offset order.
         """
         assert self._plan is not None
         cfg = self.config
-        offsets = [radial_offset_deg(g, center) for g in self._plan.grasps]
-        order = sorted(range(len(offsets)), key=lambda i: abs(offsets[i]) > 50.0)
+        grasps = list(self._plan.grasps)
+        offsets = [radial_offset_deg(g, center) for g in grasps]
+        order = grasp_order(grasps, self._lying(xyz, height), self._slipped_kinds(self.view), xyz, center, height,
+                            [abs(o) > 50.0 for o in offsets])
         fixed = self.j.turn_direction
         out = []
         for gi in order:
@@ -549,7 +591,12 @@ class Acquisition:
             self.j.counters.slips += 1
             self.j.failed_grasps.setdefault(str(k), []).append(signature)
             self._limits(k).setdefault("grasp", []).append(exc.message.split(":")[0][:40])
-            self.decide("grasp failed", grasp=gi, pose=seq.name, reason=exc.message)
+            height = float(np.asarray(grasp.contacts, float)[:, 2].mean())
+            self.j.regrasps.setdefault(str(k), []).append(
+                {"strategy": "re-grasp after slip", "slipped": grasp.kind, "pose": seq.name,
+                 "contact_height": round(height, 4), "restart": self.j.topple_restarts})
+            self.decide("grasp failed", grasp=gi, pose=seq.name, reason=exc.message,
+                        next="re-grasp: the other kind first, then lower grasps")
             self._plan = None
             self.j.grasp_mode = "auto"
             return await self._rescan(k, f"grasp failed: {exc.message}")
@@ -559,6 +606,12 @@ class Acquisition:
                         code=exc.code, message=exc.message[:200])
             return None
         shift = relocation_shift(seq)
+        if seq.direction == NO_TURN:  # already journalled at the release (``_record_reposition``)
+            self.decide("repositioned: picked and set down without a turn; the view is scanned again there",
+                        grasp=gi, pose=seq.name, kind=grasp.kind, to=self.j.centers.get(str(k), [0, 0])[:2],
+                        shift=None if shift is None else np.round(shift[:2], 3).tolist())
+            self._plan = None
+            return State.SCAN
         if shift is not None:
             self.j.counters.regrasps += 1
             self.j.regrasps.setdefault(str(k), []).append(
@@ -606,7 +659,11 @@ class Acquisition:
         failed_before = set(self.j.failed_grasps.get(str(k), []))
         await self.motion.escape(view.center, view.height)
         await self.cell.set_object_box(box_c, box_e)
-        direct = self._candidates(view.center, view.height)
+        direct = self._candidates(view.center, view.height, view.cloud.xyz)
+        chains = list(direct)
+        moved = await self._reposition(k, view.center, view.height, chains, (box_c, box_e), failures, proactive=True)
+        if moved is not None:
+            return moved
         late: list[tuple[int, Grasp, TurnPoses]] = []  # picks that were reachable; the turn or set-down was not
         relocations = 0
         scannable: dict[tuple, bool] = {}  # relocation spots: can the object be scanned there?
@@ -688,6 +745,11 @@ class Acquisition:
                                               f"{grasp.kind}:{gi}:{seq.name}", failures)
                 if outcome is not None:
                     return outcome
+        if self.j.grasp_mode == "top_down":  # the last strategy here: bring it to where the arm works best
+            moved = await self._reposition(k, view.center, view.height, chains, (box_c, box_e), failures,
+                                           proactive=False)
+            if moved is not None:
+                return moved
         self._plan = None
         if self.j.grasp_mode != "top_down":
             self.j.grasp_mode = "top_down"
@@ -695,6 +757,53 @@ class Acquisition:
             return State.PLAN_GRASP
         self.j.grasp_mode = "auto"
         return await self._rescan(k, "no executable grasp")
+
+    async def _reposition(self, k: int, center: np.ndarray, height: float,
+                          chains: list[tuple[int, Grasp, TurnPoses]], box: tuple[np.ndarray, np.ndarray],
+                          failures: list[str], proactive: bool) -> State | None:
+        """Pick the object and set it down, unturned, at the nearest favoured spot it can be scanned at
+        (``reposition.py``): ``proactive`` when it drifted off every favoured spot, else as the last resort
+        of a view where no turn is executable. The next state, or None when no reposition was executed."""
+        rc = self.config.turn.relocation
+        done = sum(1 for e in self._regrasps_now(k) if e.get("strategy") == "reposition")
+        if not (rc.enabled and rc.reposition) or done >= rc.max_repositions or not chains:
+            return None
+        spots = favoured_spots(self._workspace_center(), rc)
+        off = drift(center, spots)
+        if proactive and off <= rc.reposition_drift:
+            return None
+        shifts = reposition_shifts(center, spots, rc.min_shift)
+        self.decide("repositioning: " + ("the object stands off every spot the arm works best at" if proactive
+                                         else "no turn is executable where the object stands"),
+                    drift=round(off, 3), spots=[np.round(center[:2] + d[:2], 3).tolist() for d in shifts])
+        scannable: dict[tuple, bool] = {}
+        checks = 0
+        for d in shifts:
+            if not await self._scannable_spot(center + d, height, scannable):
+                continue
+            seen: set[tuple[int, str]] = set()
+            for gi, grasp, seq in chains:
+                base = seq.name.removesuffix("_reverse")  # one turn direction or the other: the same pick
+                if (gi, base) in seen or checks >= rc.max_checks:
+                    continue
+                seen.add((gi, base))
+                chain = relocated(without_turn(seq), d)
+                checks += 1
+                self.j.counters.grasp_checks += 1
+                try:
+                    q_start = await self.motion.check_turn(chain, center, float(grasp.width))
+                except RemoteError as exc:
+                    if exc.code in ("estop_latched", "busy"):
+                        raise
+                    failures.append(f"{chain.name}:{exc.code}")
+                    self._limits(k).setdefault("dry_run", []).append(exc.code)
+                    continue
+                outcome = await self._attempt(k, gi, grasp, chain, q_start, box, f"{grasp.kind}:{gi}:{chain.name}",
+                                              failures)
+                if outcome is not None:
+                    return outcome
+        self.decide("no reposition executable", checks=checks)
+        return None
 
     # ------------------------------------------------------------------------------------- turn journal
     def _journal_turn_intent(self, phase: str | None, **fields: Any) -> None:
@@ -713,7 +822,11 @@ class Acquisition:
     def _record_turn(self, k: int, direction: int, shift: np.ndarray | None = None) -> None:
         """The object is released where the turn ends: the next view, its commanded turn, one journal write.
         A relocated set-down (``shift``) also gives the next view's expected centre: its scan poses are
-        placed around where the object now stands, not where it stood."""
+        placed around where the object now stands, not where it stood. A pick-and-place without a turn
+        (a reposition) is recorded by ``_record_reposition`` instead: no view is added."""
+        if direction == NO_TURN:
+            self._record_reposition(k, shift)
+            return
         if shift is not None and str(k) in self.j.centers:
             c = np.asarray(self.j.centers[str(k)], float)
             self.j.centers[str(k + 1)] = (c + np.asarray(shift, float)).tolist()
@@ -726,6 +839,26 @@ class Acquisition:
         self.j.state = State.SCAN.value
         self.j.turn_intent = None
         self.j.holding = False
+        self.store.save_journal(self.j.to_dict())
+
+    def _record_reposition(self, k: int, shift: np.ndarray | None) -> None:
+        """The object was set down unturned at another spot: view ``k`` keeps its commanded turn and is
+        scanned again where the object now stands (its old frames are moved aside, never deleted)."""
+        d = np.zeros(3) if shift is None else np.asarray(shift, float)
+        if str(k) in self.j.centers:
+            self.j.centers[str(k)] = (np.asarray(self.j.centers[str(k)], float) + d).tolist()
+        n = 1 + sum(1 for e in self.j.regrasps.get(str(k), []) if e.get("strategy") == "reposition")  # folder name
+        self.j.regrasps.setdefault(str(k), []).append(
+            {"strategy": "reposition", "restart": self.j.topple_restarts, "shift": np.round(d, 4).tolist(),
+             "to": np.round(np.asarray(self.j.centers.get(str(k), d), float)[:2], 4).tolist()})
+        self.j.counters.repositions += 1
+        self.j.grasp_mode = "auto"
+        self.j.turn_intent = None
+        self.j.holding = False
+        self.j.pending_rescan = {"view": k, "attempt": n, "aside": f"moved{n}"}
+        self.store.save_journal(self.j.to_dict())
+        self._finish_rescan()
+        self.j.state = State.SCAN.value
         self.store.save_journal(self.j.to_dict())
 
     async def _recover_turn(self) -> None:
@@ -753,7 +886,9 @@ class Acquisition:
             if closed:
                 await self.cell.gripper(opening, self.config.turn.gripper_force)
             self._record_turn(k, int(intent["direction"]), intent.get("shift"))
-            self.decide("turn had finished before the restart: recorded, not repeated", view=k + 1)
+            self.decide("turn had finished before the restart: recorded, not repeated" if int(intent["direction"])
+                        else "reposition had finished before the restart: recorded, the view is scanned again",
+                        view=self.view)
             return
         if closed:
             if phase == "holding":  # possibly lifted: lower it back onto the table first

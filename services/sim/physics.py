@@ -60,6 +60,7 @@ class PhysicsConfig:
     mass_jitter: float = 0.1  # relative uniform spread of the object's mass, drawn per seed
     collision: str = "auto"  # "auto" (hull if nearly convex, else coacd), "coacd" (decomposition, cached), "hull"
     topple_tilt_deg: float = 30.0  # an object resting tilted more than this has toppled
+    mass: float = 0.0  # kg: the object's mass (its inertia scaled to match); 0 = density x its closed volume
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -135,6 +136,11 @@ class PhysicsScene:
         self.config = config or PhysicsConfig()
         self.parts, self.collision_method = convex_parts(obj.vertices, obj.triangles, self.config.collision)
         self.model = mujoco.MjModel.from_xml_string(self._xml())
+        if self.config.mass > 0:  # a given mass: the density's inertia scaled to it (same shape, same centre)
+            body = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, "object")
+            scale = self.config.mass / float(self.model.body_mass[body])
+            self.model.body_mass[body] *= scale
+            self.model.body_inertia[body] *= scale
         self._base_friction = self.model.geom_friction.copy()
         self._base_mass = self.model.body_mass.copy()
         self._base_inertia = self.model.body_inertia.copy()

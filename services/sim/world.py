@@ -26,6 +26,7 @@ from common.messages import Intrinsics, RGBDFrame, d435_intrinsics
 from services.sim.catalogue import SimObject, load_object, resolve_object
 from services.sim.errors import SimError, SimInputError, check_transform
 from services.sim.gripper import GraspChecker, GraspOutcome, GripperSpec
+from services.sim.object_physics import physics_config_for
 from services.sim.physics import PHYSICS_MODES, PhysicsConfig, PhysicsScene, tilt_deg
 from services.sim.profiles import ErrorProfile, get_profile
 from services.sim.render import RenderResult, RenderScene, SceneBox, TableSpec, render
@@ -99,6 +100,8 @@ class World:
         self._checker = GraspChecker(self.obj.vertices, self.obj.triangles, pts, self.obj.triangle_normals()[tri],
                                      self.obj.surface_area, gripper)
         self._scene: RenderScene | None = None
+        if physics == "mujoco" and physics_config is None and isinstance(obj, str):
+            physics_config = physics_config_for(obj)  # the mesh's own mass and friction, when it states them
         self._physics = PhysicsScene(self.obj, gripper, physics_config) if physics == "mujoco" else None
         self.reset(seed)
 

@@ -19,7 +19,8 @@ import pytest
 from tests.report.test_real_acquisition import free_port
 
 REPO = Path(__file__).resolve().parents[2]
-LIMITS = ("limit: reach", "limit: gripper stroke", "limit: no collision-free grasp", "limit: grasps did not hold")
+LIMITS = ("limit: reach", "limit: gripper stroke", "limit: no collision-free grasp", "limit: grasps did not hold",
+          "limit: stability")
 
 
 def household_mesh(kind: str) -> o3d.geometry.TriangleMesh:
