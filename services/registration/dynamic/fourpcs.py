@@ -41,7 +41,6 @@ from dataclasses import dataclass, replace
 from time import perf_counter
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt
 from scipy.spatial import cKDTree
 
 from services.registration.dynamic.fourpcs_common import (
@@ -51,7 +50,6 @@ from services.registration.dynamic.fourpcs_common import (
     as_xyz,
     check_transform,
 )
-from services.registration.dynamic.fourpcs_kernels import match_congruent
 
 
 @dataclass(frozen=True)
@@ -252,6 +250,8 @@ class _DistanceGrid:
         occupied = np.zeros(tuple(shape), dtype=bool)
         idx = np.floor((target - self.origin) / self.cell).astype(int)
         occupied[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+        from scipy.ndimage import distance_transform_edt  # here, not at import: only the global search scores
+
         dist = distance_transform_edt(~occupied, sampling=self.cell)
         self.weight = np.clip(1.0 - (dist / self.delta) ** 2, 0.0, None).astype(np.float32).ravel()
         self.shape = shape
@@ -337,6 +337,9 @@ def _congruent_sets(Q: np.ndarray, pairs: _PairIndex, B: np.ndarray,
     cos_lo, cos_hi = math.cos(min(math.pi, theta + tol)), math.cos(max(0.0, theta - tol))
     base_d = np.array([np.linalg.norm(B[0] - B[2]), np.linalg.norm(B[0] - B[3]),
                        np.linalg.norm(B[1] - B[2]), np.linalg.norm(B[1] - B[3])])
+    # numba (~0.6 CPU-s to import) only when a global search runs: most reconstructions never need one
+    from services.registration.dynamic.fourpcs_kernels import match_congruent
+
     return match_congruent(Q, i1, j1, e1, i2, j2, e2, float(delta), cos_lo, cos_hi, base_d,
                            cfg.other_distance_factor * delta, cfg.max_congruent_per_base)
 
