@@ -7,14 +7,16 @@ RUN apt-get update \
  && rm -rf /var/lib/apt/lists/*
 
 WORKDIR /opt/objscan
-# the runtime lock only: test tools (pytest, hypothesis, atheris, ruff) live in requirements-dev.lock
+# the runtime lock only: test tools (pytest, hypothesis, atheris, ruff) live in requirements-dev.lock.
+# --compile-bytecode: the services run as a user who cannot write into site-packages, so without the bytecode
+# written here every start would compile open3d's, scipy's and scikit-learn's sources again (seconds of CPU)
 COPY requirements.lock pyproject.toml README.md ./
 RUN pip install --no-cache-dir uv \
- && uv pip install --system --no-cache -r requirements.lock
+ && uv pip install --system --no-cache --compile-bytecode -r requirements.lock
 COPY common ./common
 COPY services ./services
 COPY bench ./bench
-RUN uv pip install --system --no-cache --no-deps .
+RUN uv pip install --system --no-cache --compile-bytecode --no-deps .
 
 # Every service runs as the unprivileged user `objscan`, never root. Build it with the host user's uid/gid
 # (docker-compose.yml passes OBJSCAN_UID/OBJSCAN_GID) so the orchestrator can write ./sessions and ./models.

@@ -55,7 +55,7 @@ install_lock() {  # lock file, stamp: install when the lock or pyproject changed
   if [ ! -f "$stamp" ] || [ "$lock" -nt "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
     echo "objscan: installing Python dependencies from $lock (first time: a few minutes, ~1.5 GB)"
     .venv/bin/python -m pip install -q --upgrade pip uv
-    .venv/bin/uv pip install -q --python .venv/bin/python -r "$lock"
+    .venv/bin/uv pip install -q --compile-bytecode --python .venv/bin/python -r "$lock"
     .venv/bin/uv pip install -q --python .venv/bin/python --no-deps -e .
     touch "$stamp"
   fi
@@ -64,5 +64,16 @@ install_lock requirements.lock .venv/.objscan-installed
 if [ "$DEV" -eq 1 ]; then
   install_lock requirements-dev.lock .venv/.objscan-dev-installed
 fi
+# Bytecode for every installed package and for objscan's own modules, written now: a process that may not
+# write it (PYTHONDONTWRITEBYTECODE, a read-only install) otherwise compiles open3d's, scipy's and
+# scikit-learn's Python sources again at every start, seconds of CPU per command. Python checks each file's
+# timestamp, so a source edited later is compiled afresh, never run stale. Once per environment for the
+# packages (a venv installed before this step gets it on the next run), every time for objscan's modules.
+if [ ! -f .venv/.objscan-bytecode ]; then
+  echo "objscan: compiling the installed packages' bytecode (once)"
+  .venv/bin/python -m compileall -q -j 0 .venv/lib/python3*/site-packages >/dev/null || true
+  touch .venv/.objscan-bytecode
+fi
+.venv/bin/python -m compileall -q -j 0 common services bench >/dev/null || true
 .venv/bin/python -c 'import open3d, zenoh, pinocchio, ruckig, pyrealsense2, rerun, foxglove' \
   || { echo "objscan: the installed environment does not import; see the error above" >&2; exit 1; }

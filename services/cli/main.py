@@ -39,7 +39,22 @@ COMMANDS = [
 ]
 
 
-def build_parser() -> argparse.ArgumentParser:
+def command_module(argv: list[str]) -> str | None:
+    """The module of the command ``argv`` names (its first word that is not an option), or None when it names
+    none of ``COMMANDS`` (then every command is registered, so help and "invalid choice" list them all).
+
+    Why: each command module imports what its command needs (Zenoh, Open3D, OpenCV, the exporter, ...); a
+    process that reconstructs a session should not pay the start-up of calibration or export. Top-level options
+    take no values, so the first other word is the command."""
+    word = next((a for a in argv if not a.startswith("-")), None)
+    if word is None:
+        return None
+    name = f"services.cli.cmd_{word.replace('-', '_')}"
+    return name if name in COMMANDS else None
+
+
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The ``objscan`` parser; with ``argv`` naming a command, only that command's module is imported."""
     parser = outcome.CliParser(
         prog="objscan",
         description="Autonomous object model acquisition with a robot arm and a wrist RGB-D camera.",
@@ -50,13 +65,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true",
                         help="log at debug level, with full tracebacks (or set OBJSCAN_LOG_LEVEL=debug)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name in COMMANDS:
+    only = None if argv is None else command_module(argv)
+    for name in COMMANDS if only is None else [only]:
         importlib.import_module(name).register(sub)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     level = "DEBUG" if args.debug else os.environ.get("OBJSCAN_LOG_LEVEL", "WARNING")
     setup_logging("cli", str(os.getpid()), level)

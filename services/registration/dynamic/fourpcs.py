@@ -36,12 +36,12 @@ that at service start instead of on the first registration.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from functools import cache
 from time import perf_counter
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt
 from scipy.spatial import cKDTree
 
 from services.registration.dynamic.fourpcs_common import (
@@ -51,7 +51,6 @@ from services.registration.dynamic.fourpcs_common import (
     as_xyz,
     check_transform,
 )
-from services.registration.dynamic.fourpcs_kernels import match_congruent
 
 
 @dataclass(frozen=True)
@@ -113,6 +112,7 @@ def register_4pcs_overlaps(source_xyz: np.ndarray, target_xyz: np.ndarray, *,
     if not delta > 0.0:
         raise PointCloudInputError(f"delta must be > 0, got {delta}", code="bad_value",
                                    detail={"field": "delta"})
+    _match_congruent()  # numba's import before any clock starts: it must not eat a search's max_time_s
     problem = _Problem(source_xyz, target_xyz, source_normals, target_normals, delta=delta,
                        sample_size=sample_size, max_overlap=max(overlaps), seed=seed, cfg=cfg)
     results = []
@@ -213,6 +213,15 @@ def _same_pose(Ta: np.ndarray, Tb: np.ndarray, centre: np.ndarray, delta: float,
     return bool(moved <= delta and math.degrees(math.acos(max(-1.0, min(1.0, c)))) <= angle_deg)
 
 
+@cache
+def _match_congruent() -> Callable[..., np.ndarray]:
+    """The numba kernel of the congruent-set search, imported on first need: numba costs ~0.6 CPU-s to import
+    and most reconstructions never run a global search."""
+    from services.registration.dynamic.fourpcs_kernels import match_congruent
+
+    return match_congruent
+
+
 def default_max_bases(overlap: float, success: float = 0.99, factor: float = 4.0) -> int:
     """Bases to draw so that one lies entirely in the overlap with probability ``success`` (times ``factor``).
 
@@ -252,6 +261,8 @@ class _DistanceGrid:
         occupied = np.zeros(tuple(shape), dtype=bool)
         idx = np.floor((target - self.origin) / self.cell).astype(int)
         occupied[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+        from scipy.ndimage import distance_transform_edt  # here, not at import: only the global search scores
+
         dist = distance_transform_edt(~occupied, sampling=self.cell)
         self.weight = np.clip(1.0 - (dist / self.delta) ** 2, 0.0, None).astype(np.float32).ravel()
         self.shape = shape
@@ -337,8 +348,8 @@ def _congruent_sets(Q: np.ndarray, pairs: _PairIndex, B: np.ndarray,
     cos_lo, cos_hi = math.cos(min(math.pi, theta + tol)), math.cos(max(0.0, theta - tol))
     base_d = np.array([np.linalg.norm(B[0] - B[2]), np.linalg.norm(B[0] - B[3]),
                        np.linalg.norm(B[1] - B[2]), np.linalg.norm(B[1] - B[3])])
-    return match_congruent(Q, i1, j1, e1, i2, j2, e2, float(delta), cos_lo, cos_hi, base_d,
-                           cfg.other_distance_factor * delta, cfg.max_congruent_per_base)
+    return _match_congruent()(Q, i1, j1, e1, i2, j2, e2, float(delta), cos_lo, cos_hi, base_d,
+                              cfg.other_distance_factor * delta, cfg.max_congruent_per_base)
 
 
 def _select_base(S: np.ndarray, rng: np.random.Generator, *, max_base: float, coplanar_tol: float,
