@@ -17,6 +17,7 @@ from common.atomic import atomic_write_bytes
 from common.errors import ObjscanError
 from services.cli.cmd_ros2_bag import add_ros2_bag_options, write_ros2_bag
 from services.cli.cmd_scan import console
+from services.cli.library_attach import store_with_library_entry
 from services.cli.outcome import OK, BadUsage, one_line, report_error
 
 
@@ -92,21 +93,6 @@ def run(args) -> int:  # noqa: ANN001
             _write_json(Path(args.json_file), result)
     _say(result)
     return OK
-
-
-def store_with_library_entry(session: Path, command: str) -> str | None:
-    """The export's mesh and asset stored with the library entry the acquisition made (if it made one).
-
-    The files are written either way: a library that cannot take them costs a warning line, not the export.
-    """
-    from services.library import attach_session_export
-
-    try:
-        return attach_session_export(session)
-    except ObjscanError as exc:
-        print(one_line(f"objscan {command}: WARNING: the export is not stored with the library entry: "
-                       f"{exc.message} [{exc.code}]"), file=sys.stderr)
-        return None
 
 
 def _write_json(path: Path, doc: dict[str, Any]) -> None:

@@ -248,7 +248,7 @@ def export_after_scan(session_dir: Path, *, quiet: bool) -> int:
     except ObjscanError as exc:
         print(one_line(f"objscan scan: export failed: {exc.message} [{exc.code}]"), file=sys.stderr)
         return 1
-    from services.cli.cmd_export import store_with_library_entry
+    from services.cli.library_attach import store_with_library_entry
 
     store_with_library_entry(session_dir, "scan")  # the acquisition stored the model before this export
     if not quiet:
