@@ -79,18 +79,24 @@ async def _steps(acq: Acquisition, n: int) -> list[State]:
     return seen
 
 
-def test_a_toppled_bottle_lying_on_its_side_is_grasped_across_from_above_and_turned(kin, tmp_path):
-    center = np.array([0.45, 0.0, 0.0])
+def _lying_bottle(kin, tmp_path, center: tuple[float, float], along: tuple[float, float]):
+    """A bottle lying on its side at ``center`` (axis ``along``), its view 0 saved, and an acquisition about to
+    plan the grasp of that view after the views restarted from where it lies (it toppled)."""
+    c = np.array([*center, 0.0])
     r, length = BOTTLE
-    xyz, normals = cylinder(r, length, 8000, lying_along=np.array([1.0, 1.0, 0.0]), xy=center[:2],
-                            view_from=_cams(center), noise=0.0005)
+    xyz, normals = cylinder(r, length, 8000, lying_along=np.array([*along, 0.0]), xy=c[:2], view_from=_cams(c),
+                            noise=0.0005)
     store = SessionStore(tmp_path)
-    store.save_view(_view(xyz, normals, center, 2 * r, 0))
+    store.save_view(_view(xyz, normals, c, 2 * r, 0))
     cell = PlanningCell(np.asarray(SimArmDriver(send=lambda q, o: None).config.initial_q, float), kin)
     acq = Acquisition(cell, store, AcquisitionConfig(views=3))  # type: ignore[arg-type]
-    # the views restarted from where it lies after it toppled
-    acq.j.update(view=0, state="plan_grasp", topple_restarts=1, centers={"-1": center.tolist(), "0": center.tolist()},
+    acq.j.update(view=0, state="plan_grasp", topple_restarts=1, centers={"-1": c.tolist(), "0": c.tolist()},
                  heights={"-1": 2 * r, "0": 2 * r})
+    return cell, acq
+
+
+def test_a_toppled_bottle_lying_on_its_side_is_grasped_across_from_above_and_turned(kin, tmp_path):
+    cell, acq = _lying_bottle(kin, tmp_path, center=(0.45, 0.0), along=(1.0, 1.0))
     seen = asyncio.run(_steps(acq, 6))
     assert cell.modes[0] == "both"  # frontal and top-down grasps alike, from the first plan
     assert seen == [State.TURN, State.SCAN], [d["what"] for d in acq.j.decisions]
@@ -105,16 +111,7 @@ def test_a_bottle_lying_across_the_line_from_the_base_is_grasped_rolled_toward_t
     """At 0.60 m the wrist cannot point straight down, and across this bottle a top-down grasp's own offsets lean
     sideways: every chain was unreachable and the view ended "no executable grasp". Rolled about the bottle's
     axis toward the base, the grasp is reachable and the acquisition turns it."""
-    center = np.array([0.60, 0.0, 0.0])
-    r, length = BOTTLE
-    xyz, normals = cylinder(r, length, 8000, lying_along=np.array([0.0, 1.0, 0.0]), xy=center[:2],
-                            view_from=_cams(center), noise=0.0005)
-    store = SessionStore(tmp_path)
-    store.save_view(_view(xyz, normals, center, 2 * r, 0))
-    cell = PlanningCell(np.asarray(SimArmDriver(send=lambda q, o: None).config.initial_q, float), kin)
-    acq = Acquisition(cell, store, AcquisitionConfig(views=3))  # type: ignore[arg-type]
-    acq.j.update(view=0, state="plan_grasp", topple_restarts=1, centers={"-1": center.tolist(), "0": center.tolist()},
-                 heights={"-1": 2 * r, "0": 2 * r})
+    cell, acq = _lying_bottle(kin, tmp_path, center=(0.60, 0.0), along=(0.0, 1.0))
     seen = asyncio.run(_steps(acq, 6))
     assert seen[-1] == State.SCAN and acq.view == 1 and acq.j.counters.rescans == 0, [d["what"] for d in
                                                                                        acq.j.decisions]

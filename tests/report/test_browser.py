@@ -32,6 +32,18 @@ def chromium(*args: str) -> subprocess.CompletedProcess:
                               text=True, timeout=180)
 
 
+def probe_result(page: str, probe_script: str, attribute: str, folder: Path) -> dict:
+    """Run ``page`` with ``probe_script`` before ``</body>`` in headless Chromium and return the JSON the probe
+    left in the body's ``attribute`` (the probe drives the page's own viewer, so this reads what it drew)."""
+    probe = folder / "probe.html"
+    probe.write_text(page.replace("</body>", probe_script))
+    proc = chromium("--dump-dom", "--virtual-time-budget=10000", probe.as_uri())
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    m = re.search(rf'{attribute}="([^"]*)"', proc.stdout)
+    assert m, "the probe did not run (script error?)"
+    return json.loads(html.unescape(m.group(1)))
+
+
 @pytest.fixture(scope="module")
 def report(milk_session, tmp_path_factory):
     return build_report(milk_session, tmp_path_factory.mktemp("br") / "report.html")
@@ -89,13 +101,7 @@ def test_the_model_turns_zooms_and_recolours_in_the_browser(report, tmp_path):
     page = report.read_text()
     assert "<canvas" in page and "http://" not in page.split("<body>", 1)[1].replace("http://www.w3.org", "")
     assert "https://" not in page  # offline: no CDN, no remote script or font
-    probe = tmp_path / "probe.html"
-    probe.write_text(page.replace("</body>", VIEWER_PROBE))
-    proc = chromium("--dump-dom", "--virtual-time-budget=10000", probe.as_uri())
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    m = re.search(r'data-viewer="([^"]*)"', proc.stdout)
-    assert m, "the probe did not run (script error?)"
-    res = json.loads(html.unescape(m.group(1)))
+    res = probe_result(page, VIEWER_PROBE, "data-viewer", tmp_path)
     assert res["turned"] and res["zoomed"] and res["recoloured"], res
     assert res["reset_restores"], res  # reset: the first view again (angle, zoom, error colouring)
     assert res["points"] > 5000 and res["ink"] > 5000, res  # the model covers the canvas, not a few dots

@@ -4,7 +4,6 @@ model: the page carries the mesh's vertices, triangles and colours, and a browse
 from __future__ import annotations
 
 import base64
-import html
 import json
 import re
 import shutil
@@ -15,7 +14,7 @@ import pytest
 
 from services.report import build_report
 from services.report.viewer import mesh_viewer_html
-from tests.report.test_browser import CHROMIUM, chromium
+from tests.report.test_browser import CHROMIUM, probe_result
 
 
 def _attr(page: str, element_id: str, name: str) -> str:
@@ -73,13 +72,7 @@ document.body.setAttribute('data-mesh',JSON.stringify({turned:a!==b,red:redA,red
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (apt-get install -y chromium)")
 def test_the_mesh_is_drawn_and_turns_in_the_browser(meshed_session, tmp_path):
     page = meshed_session[2]
-    probe = tmp_path / "probe.html"
-    probe.write_text(page.replace("</body>", MESH_PROBE))
-    proc = chromium("--dump-dom", "--virtual-time-budget=10000", probe.as_uri())
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    m = re.search(r'data-mesh="([^"]*)"', proc.stdout)
-    assert m, "the probe did not run (script error?)"
-    res = json.loads(html.unescape(m.group(1)))
+    res = probe_result(page, MESH_PROBE, "data-mesh", tmp_path)
     assert res["turned"] and res["drawn"] >= 3, res
     assert res["red"] > 20000, res  # a solid red box fills a good part of the 720 x 480 canvas
     assert res["red_zoomed"] > res["red"], res
