@@ -36,14 +36,40 @@ from typing import Any
 import numpy as np
 
 from common.messages import Intrinsics
-from services.camera.errors import BadFrameError, CameraError, CaptureTimeout
-from services.camera.intrinsics import (
-    D435_DEPTH_SCALE,
-    d435_color_intrinsics,
-    d435_depth_intrinsics,
-    d435_T_color_depth,
-)
+from services.camera.errors import BadFrameError, CameraConfigError, CameraError, CaptureTimeout
+from services.camera.intrinsics import d435_color_intrinsics
 from services.camera.realsense.camera import _rs
+
+D435_DEPTH_PRESETS: dict[tuple[int, int], tuple[float, float, float, float]] = {
+    (640, 480): (383.0, 383.0, 320.0, 240.0),
+    (848, 480): (424.0, 424.0, 424.0, 240.0),
+}
+"""(width, height) -> (fx, fy, cx, cy) of the D435 depth (left IR) camera: wider field of view than color."""
+
+D435_DEPTH_TO_COLOR_TRANSLATION_M = (0.015, 0.0, 0.0)
+"""Translation of the depth -> color extrinsics a D435 typically reports (p_color = p_depth + t), m."""
+
+D435_DEPTH_SCALE = 0.001
+"""Metres per depth unit of a D435 at its default setting."""
+
+
+def d435_depth_intrinsics(width: int = 640, height: int = 480) -> Intrinsics:
+    """Typical D435 depth-imager intrinsics for a supported size (a fresh object each call)."""
+    try:
+        fx, fy, cx, cy = D435_DEPTH_PRESETS[(int(width), int(height))]
+    except KeyError:
+        sizes = ", ".join(f"{w}x{h}" for w, h in D435_DEPTH_PRESETS)
+        raise CameraConfigError(f"no D435 depth preset for {width}x{height}; known: {sizes}",
+                                detail={"width": width, "height": height}) from None
+    return Intrinsics(width=int(width), height=int(height), fx=fx, fy=fy, cx=cx, cy=cy)
+
+
+def d435_T_color_depth() -> np.ndarray:
+    """Typical extrinsics ``T_color_depth`` (depth frame -> color frame) of a D435: a pure translation."""
+    T = np.eye(4)
+    T[:3, 3] = D435_DEPTH_TO_COLOR_TRANSLATION_M
+    return T
+
 
 FramePair = tuple[np.ndarray, np.ndarray]
 """(depth uint16 HxW in depth units, color uint8 HxWx3 RGB)."""

@@ -1,4 +1,4 @@
-"""A Zenoh router in Python, for the embedded default (``objscan up``) and for tests.
+"""A Zenoh router in Python: the embedded default (``objscan up``).
 
 Docker deployments use the official ``eclipse/zenoh`` router instead; both speak the same protocol, so
 services cannot tell them apart. Run: ``python -m common.router --listen tcp/127.0.0.1:7447``.

@@ -168,7 +168,7 @@ class TlsSettings:
 
 
 def free_tcp_port() -> int:
-    """A TCP port that was free a moment ago on loopback (for tests and the embedded launcher)."""
+    """A TCP port that was free a moment ago on loopback (the embedded launcher's pick)."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])

@@ -28,7 +28,7 @@ BACKENDS: dict[str, str] = {
 @dataclass
 class CameraContext:
     """What a factory may need from its caller: the twin's render call (sim), an ``rs.device`` to use
-    instead of searching USB (realsense: a software D435 in tests)."""
+    instead of searching USB (realsense: an emulated D435, ``bench/software_d435.py``)."""
 
     render_request: Any = None
     device: Any = None

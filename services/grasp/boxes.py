@@ -30,7 +30,7 @@ class OrientedBox:
                    0.5 * np.asarray(extents, float).reshape(3))
 
     def corners(self) -> np.ndarray:
-        """The 8 corners (8, 3), for drawing and for tests."""
+        """The 8 corners (8, 3): the planner's lowest pad point is the lowest of them."""
         signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
         return self.center + (signs * self.half_extents) @ self.rotation.T
 

@@ -55,7 +55,7 @@ import secrets
 import shutil
 import sqlite3
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -91,7 +91,8 @@ ENTRY_ID = re.compile(r"^[a-z0-9][a-z0-9-]{0,39}-\d{8}-\d{6}-[0-9a-f]{6}$")
 WORK_NAME = re.compile(r"^(?P<id>[a-z0-9][a-z0-9-]{0,39}-\d{8}-\d{6}-[0-9a-f]{6})\.\d+$")
 """``<entry id>.<pid>``: an add (``.staging``) or delete (``.trash``) in progress."""
 
-#: Points where a test (or a curious operator) can stop an ``add`` or ``delete``; see ``fault_hook``.
+#: The named points an ``add`` or ``delete`` passes (``ModelLibrary._passed``): the crash rule is stated, and
+#: checked, at each of them.
 ADD_STAGES = ("staging_created", "files_written", "metadata_written", "renamed", "row_inserted", "committed")
 DELETE_STAGES = ("trashed", "row_deleted", "committed")
 
@@ -148,17 +149,11 @@ class ReconcileReport:
 
 
 class ModelLibrary:
-    """A folder of models with a SQLite index; see the module doc for the layout and the crash rule.
+    """A folder of models with a SQLite index; see the module doc for the layout and the crash rule."""
 
-    ``fault_hook`` (tests only) is called with each stage name of ``ADD_STAGES`` / ``DELETE_STAGES`` as an
-    add or delete passes it; raising there, or killing the process there, simulates a crash at that point.
-    """
-
-    def __init__(self, root: str | Path, *, descriptor_config: DescriptorConfig | None = None,
-                 fault_hook: Callable[[str], None] | None = None):
+    def __init__(self, root: str | Path, *, descriptor_config: DescriptorConfig | None = None):
         self.root = Path(root)
         self.descriptor_config = descriptor_config or DescriptorConfig()
-        self.fault_hook = fault_hook
         _claim(self.root)
         try:
             for sub in (ENTRIES, STAGING, TRASH):
@@ -202,18 +197,18 @@ class ModelLibrary:
             final = self.root / ENTRIES / entry_id
             try:
                 stage.mkdir()
-                self._fault("staging_created")
+                self._passed("staging_created")
                 files = {MODEL_FILE: _write_cloud(stage / MODEL_FILE, pcd),
                          DESCRIPTORS_FILE: _write_npz(stage / DESCRIPTORS_FILE, desc)}
                 if mesh_obj is not None:
                     files[MESH_FILE] = _write_mesh(stage / MESH_FILE, mesh_obj)
                 if asset is not None:
                     files.update(_copy_asset(Path(asset), stage / ASSET_DIR))
-                self._fault("files_written")
+                self._passed("files_written")
                 record = {"id": entry_id, "points": len(pcd.points), "files": files, "metadata": meta.to_dict()}
                 _write_synced(stage / METADATA_FILE, json.dumps(record, indent=2, default=json_default).encode())
                 fsync_dir(stage)
-                self._fault("metadata_written")
+                self._passed("metadata_written")
                 os.rename(stage, final)
                 fsync_dir(final.parent)
                 fsync_dir(stage.parent)
@@ -221,15 +216,15 @@ class ModelLibrary:
                 shutil.rmtree(stage, ignore_errors=True)
                 raise
             try:
-                self._fault("renamed")
+                self._passed("renamed")
                 with self._transaction() as db:
                     db.execute("INSERT INTO models VALUES (?, ?, ?, ?, ?, ?, ?, ?)", _row(record))
-                    self._fault("row_inserted")
-                self._fault("committed")
+                    self._passed("row_inserted")
+                self._passed("committed")
             except BaseException:
                 # roll back a committed-on-disk entry the caller never got an id for; the row (if the
                 # failure came after commit) goes too, so either both exist or neither does
-                self._remove_entry(entry_id, hooks=False)
+                self._remove_entry(entry_id, mark_stages=False)
                 raise
         return entry_id
 
@@ -350,9 +345,10 @@ class ModelLibrary:
             return int(db.execute("SELECT COUNT(*) FROM models").fetchone()[0])
 
     # ------------------------------------------------------------------------------------------ internals
-    def _fault(self, stage: str) -> None:
-        if self.fault_hook is not None:
-            self.fault_hook(stage)
+    def _passed(self, stage: str) -> None:
+        """An add or delete has reached ``stage`` (one of ``ADD_STAGES`` / ``DELETE_STAGES``): the points
+        where the crash rule says what a crash leaves. Nothing to do here; named so the rule can be checked
+        at each point."""
 
     def _entry(self, entry_id: str, metadata_json: str, points: int) -> ModelEntry:
         return ModelEntry(id=entry_id, metadata=ModelMetadata.from_dict(json.loads(metadata_json)),
@@ -374,19 +370,20 @@ class ModelLibrary:
                                 detail={"id": entry_id, "matches": sorted(r[0] for r in rows)[:10]})
         return rows[0]
 
-    def _remove_entry(self, entry_id: str, *, hooks: bool = True) -> None:
-        """Trash the folder (commit point), delete the row, then the files; the caller holds the lock."""
-        fault = self._fault if hooks else (lambda _stage: None)
+    def _remove_entry(self, entry_id: str, *, mark_stages: bool = True) -> None:
+        """Trash the folder (commit point), delete the row, then the files; the caller holds the lock.
+        ``mark_stages`` is False when an add rolls back (its stages are not a delete's)."""
+        passed = self._passed if mark_stages else (lambda _stage: None)
         src = self.root / ENTRIES / entry_id
         trash = self.root / TRASH / f"{entry_id}.{os.getpid()}"
         if src.exists():
             os.rename(src, trash)
             fsync_dir(src.parent)
-        fault("trashed")
+        passed("trashed")
         with self._transaction() as db:
             db.execute("DELETE FROM models WHERE id = ?", (entry_id,))
-            fault("row_deleted")
-        fault("committed")
+            passed("row_deleted")
+        passed("committed")
         shutil.rmtree(trash, ignore_errors=True)
 
     @contextlib.contextmanager

@@ -76,8 +76,8 @@ _EXPORTS: dict[str, str] = {
                      "from_o3d", "o3d_seeded", "read_ply", "to_o3d", "transform_cloud", "write_ply"), "cloud"),
     **dict.fromkeys(("ColorICPConfig", "FeatureMatchConfig", "colored_icp", "fpfh_features", "mean_spacing",
                      "overlap_only", "ransac_feature_match"), "blocks"),
-    # the dynamic stage's steps, for the benchmarks that measure one step alone (pair_yaw, turns,
-    # global_registration): the same functions ``build_model`` runs
+    # the dynamic stage's steps one at a time (the same functions ``build_model`` runs), so a step can be
+    # measured alone (``objscan bench`` pair_yaw, turns, global_registration)
     **dict.fromkeys(("global_register", "refine_icp"), "dynamic.global_registration"),
     **dict.fromkeys(("attach_regions", "fit_palette", "neighbour_edges", "preprocess", "quantize"),
                     "dynamic.preprocess"),

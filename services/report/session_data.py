@@ -140,7 +140,7 @@ def ground_truth_points(session: SessionData, n: int = 60000) -> np.ndarray | No
         return None
     from services.sim.catalogue import load_object
     from services.sim.errors import SimInputError, SimObjectError
-    from services.sim.scenario import true_object_points
+    from services.sim.ground_truth import true_object_points
 
     try:
         if frame.meta.get("object_model"):

@@ -158,7 +158,7 @@ class RenderScene:
 
 @dataclass
 class RenderResult:
-    """One rendered frame. ``labels`` and ``depth_true`` are ground truth, for tests and evaluation."""
+    """One rendered frame. ``labels`` and ``depth_true`` are ground truth, for evaluation."""
 
     color: np.ndarray  # uint8 (H, W, 3)
     depth: np.ndarray  # uint16 (H, W), metres = depth * depth_scale, 0 = no data

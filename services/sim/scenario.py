@@ -1,4 +1,4 @@
-"""Ready-made simulated scans for tests and benchmarks: no services, no arm, just the twin.
+"""Scripted twin scans without services: the input of the benchmarks (``objscan bench``), no arm, just the twin.
 
 ``simulated_views`` does what an acquisition does to the object, minus the grasping: for each view it
 scans the object from a few camera poses around its front, then a person turns it by 30° (with the
@@ -28,7 +28,6 @@ from common.geometry import look_at
 from common.messages import Intrinsics, RGBDFrame, d435_intrinsics
 from common.session_folder import write_scan
 from common.session_folder import write_session as write_session_json
-from services.sim.catalogue import load_object
 from services.sim.errors import SimInputError
 from services.sim.profiles import PROFILES, ErrorProfile, get_profile, hand_turn
 from services.sim.world import World, default_object_pose
@@ -107,7 +106,7 @@ def simulated_views(object_name: str, *, views: int = 12, scans_per_view: int = 
     ``turn_deg * view``), ``achieved_turn_deg_true`` (cumulative, ground truth), ``T_base_object_true``,
     ``object``, ``profile``, ``seed`` and ``planned_center`` (the point the scan poses aim at; with
     ``plan_from="estimate"``, the default, it comes from the previous view or a locate frame, see the
-    module docstring; ``"truth"`` aims at the true centre, for tests of the renderer only).
+    module docstring; ``"truth"`` aims at the true centre, whatever the profile's errors).
     Default intrinsics: D435 640x480.
     """
     if plan_from not in ("estimate", "truth"):
@@ -185,19 +184,3 @@ def write_session(directory: str | Path, views: list[list[RGBDFrame]], *, extra:
         data.update(extra)
     write_session_json(session, data)
     return session
-
-
-def true_object_points(frame: RGBDFrame, n: int = 50000, seed: int = 0, *, colors: bool = False
-                       ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
-    """Ground-truth surface samples of the object in ``base`` as it stood when ``frame`` was captured
-    (from the frame's ``object_model`` and ``T_base_object_true``; works on frames read back from a
-    session folder too). With ``colors``: (points, uint8 colours). For evaluation only."""
-    meta = frame.meta or {}
-    model, T = meta.get("object_model"), meta.get("T_base_object_true")
-    if not model or T is None:
-        raise SimInputError("frame carries no ground truth (not from the sim?)", code="bad_value")
-    obj = load_object(model["source"] or model["name"], scale=model["scale"], up_axis=model["up_axis"])
-    T = np.asarray(T, dtype=np.float64).reshape(4, 4)
-    pts, rgb = obj.gt_colored_points(n, seed)
-    pts = pts @ T[:3, :3].T + T[:3, 3]
-    return (pts, rgb) if colors else pts

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bench.software_d435 import d435_depth_intrinsics, d435_T_color_depth
 from common.messages import Intrinsics, RGBDFrame, d435_intrinsics
 from services.camera import (
     BadFrameError,
@@ -17,7 +18,7 @@ from services.camera import (
     config_from_dict,
     make_camera,
 )
-from services.camera.intrinsics import d435_color_intrinsics, d435_depth_intrinsics, d435_T_color_depth
+from services.camera.intrinsics import d435_color_intrinsics
 from services.camera.realsense import RealSenseCamera
 from services.camera.replay import ReplayCamera
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.software_d435 import SoftwareD435Spec, record_db3
+from bench.software_d435 import SoftwareD435Spec, d435_depth_intrinsics, d435_T_color_depth, record_db3
 from services.camera.errors import CameraError, EndOfReplay, ReplayDataError
-from services.camera.intrinsics import d435_color_intrinsics, d435_depth_intrinsics, d435_T_color_depth
+from services.camera.intrinsics import d435_color_intrinsics
 from services.camera.realsense import RealSenseCamera, RealSenseCameraConfig
 from tests.camera.scene import BOX_COLOR, BOX_Z, render, to_units
 

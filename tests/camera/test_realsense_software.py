@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from bench.software_d435 import SoftwareD435, SoftwareD435Spec
+from bench.software_d435 import SoftwareD435, SoftwareD435Spec, d435_depth_intrinsics, d435_T_color_depth
 from common.geometry import invert
 from common.messages import Intrinsics
 from services.camera.errors import BadFrameError, CaptureTimeout, NoDeviceError
-from services.camera.intrinsics import d435_color_intrinsics, d435_depth_intrinsics, d435_T_color_depth
+from services.camera.intrinsics import d435_color_intrinsics
 from services.camera.realsense import RealSenseCamera, RealSenseCameraConfig
 from tests.camera.scene import BOX_COLOR, BOX_Z, WALL_Z, render, to_units
 from tests.conftest import shared_data

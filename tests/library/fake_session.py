@@ -25,7 +25,8 @@ from services.registration.api import (
     view_from_static,
     write_ply,
 )
-from services.sim.scenario import simulated_views, true_object_points, write_session
+from services.sim.ground_truth import true_object_points
+from services.sim.scenario import simulated_views, write_session
 
 
 def build_fake_session(directory: Path, object_name: str = "milk", *, views: int = 4, turn_deg: float = 90.0,

@@ -2,13 +2,30 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from pathlib import Path
+
 import numpy as np
 import open3d as o3d
 
 from services.library.descriptors import DescriptorConfig
+from services.library.store import ModelLibrary
 
 #: Cheap descriptors so tests that only exercise storage stay fast.
 FAST_DESCRIPTORS = DescriptorConfig(views=4, max_points=2000)
+
+
+class CrashingLibrary(ModelLibrary):
+    """A library that calls ``at_stage(stage)`` as an add or delete passes each of its named stages
+    (``ADD_STAGES`` / ``DELETE_STAGES``): raising there, or killing the process there, is a crash at that
+    point."""
+
+    def __init__(self, root: str | Path, at_stage: Callable[[str], None], **kwargs) -> None:
+        self.at_stage = at_stage
+        super().__init__(root, **kwargs)
+
+    def _passed(self, stage: str) -> None:
+        self.at_stage(stage)
 
 
 def box_surface(size=(0.06, 0.04, 0.12), n: int = 3000, seed: int = 0, color=(200, 30, 30)
@@ -41,13 +58,11 @@ def crash_child(root: str, op: str, stage: str, target: str | None = None) -> No
     import os
     import signal
 
-    from services.library import ModelLibrary
-
     def hook(s: str) -> None:
         if s == stage:
             os.kill(os.getpid(), signal.SIGKILL)
 
-    lib = ModelLibrary(root, descriptor_config=FAST_DESCRIPTORS, fault_hook=hook)
+    lib = CrashingLibrary(root, hook, descriptor_config=FAST_DESCRIPTORS)
     if op == "add":
         lib.add(box_surface(seed=5), {"object_name": "killed", "quality": {"chamfer_mm": 2.5}})
     else:

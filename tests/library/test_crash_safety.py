@@ -19,7 +19,7 @@ import pytest
 
 from services.library import ModelLibrary, ModelMetadata
 from services.library.store import ADD_STAGES, DELETE_STAGES, ENTRIES, METADATA_FILE, MODEL_FILE, STAGING, TRASH
-from tests.library.helpers import FAST_DESCRIPTORS, box_surface, crash_child
+from tests.library.helpers import FAST_DESCRIPTORS, CrashingLibrary, box_surface, crash_child
 
 COMMITTED_ADD = {"renamed", "row_inserted", "committed"}  # the rename into entries/ is the commit point
 
@@ -50,7 +50,7 @@ def assert_consistent(lib: ModelLibrary) -> None:
 def test_exception_during_add_leaves_nothing(tmp_path, stage):
     root = tmp_path / "lib"
     ModelLibrary(root, descriptor_config=FAST_DESCRIPTORS).add(box_surface(seed=1), {"object_name": "before"})
-    lib = ModelLibrary(root, descriptor_config=FAST_DESCRIPTORS, fault_hook=_raise_at(stage))
+    lib = CrashingLibrary(root, _raise_at(stage), descriptor_config=FAST_DESCRIPTORS)
     with pytest.raises(Crash):
         lib.add(box_surface(), {"object_name": "crashed"})
     assert [e.metadata.object_name for e in lib.list()] == ["before"]
@@ -67,7 +67,7 @@ def test_exception_during_delete_finishes_the_delete(tmp_path, stage):
     base = ModelLibrary(root, descriptor_config=FAST_DESCRIPTORS)
     keep = base.add(box_surface(seed=1), {"object_name": "keep"})
     gone = base.add(box_surface(seed=2), {"object_name": "gone"})
-    lib = ModelLibrary(root, descriptor_config=FAST_DESCRIPTORS, fault_hook=_raise_at(stage))
+    lib = CrashingLibrary(root, _raise_at(stage), descriptor_config=FAST_DESCRIPTORS)
     with pytest.raises(Crash):
         lib.delete(gone)
     assert [e.id for e in lib.list()] == [keep]

@@ -1,4 +1,4 @@
-"""RealSense D435 backend (pyrealsense2): live camera, .db3 playback, and a software D435 for tests.
+"""RealSense D435 backend (pyrealsense2): live camera, .db3 playback, or an injected ``rs.device`` (an emulated D435).
 
 Options: ``width``/``height``, ``serial``, ``visual_preset``, ``no_exposure_lock``, ``playback`` (a .db3).
 Its frames are stamped with the pose the arm believes (``pose_from_arm``).

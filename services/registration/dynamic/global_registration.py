@@ -147,8 +147,8 @@ def refine_icp(source: np.ndarray | o3d.geometry.PointCloud, target: np.ndarray 
                iterations: int = 50) -> tuple[np.ndarray, float, float]:
     """Point-to-plane ICP from ``T_init`` at ``voxel``: (T, fitness, inlier RMSE).
 
-    A plain local refinement for tests and the benchmark ("success after local refinement"); the paper's
-    full local stage (color ICP, GICP, overlap removal) lives in the pair-registration pipeline.
+    A plain local refinement after a global estimate (what "success after local refinement" is judged
+    with); the paper's full local stage (color ICP, GICP, overlap removal) lives in the pair-registration pipeline.
     """
     src = preprocess(source, voxel, name="source")
     tgt = preprocess(target, voxel, name="target")

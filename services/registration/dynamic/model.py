@@ -169,7 +169,7 @@ def sequential_map(jobs: list[PairJob]) -> list[PairResult]:
 
 
 def process_pool_map(workers: int) -> MapPairs:
-    """A ``map_pairs`` that runs jobs in ``workers`` local processes (for benchmarks and offline use)."""
+    """A ``map_pairs`` that runs jobs in ``workers`` local processes: offline use of one machine's cores."""
     def run(jobs: list[PairJob]) -> list[PairResult]:
         with ProcessPoolExecutor(max_workers=workers) as pool:
             return list(pool.map(register_pair, jobs))

@@ -249,7 +249,7 @@ def refine_turn(source: Cloud, target: Cloud, axis: np.ndarray, center: np.ndarr
 
 
 def known_turn(axis: np.ndarray, center: np.ndarray, yaw_deg: float, shift: np.ndarray) -> np.ndarray:
-    """The 4x4 of a yaw about ``axis`` through ``center`` followed by ``shift`` (for tests and priors)."""
+    """The 4x4 of a yaw about ``axis`` through ``center`` followed by ``shift`` (a turn prior from a known yaw)."""
     R = rotation_about_axis(axis, np.radians(yaw_deg))
     c = np.asarray(center, dtype=float)
     return make_transform(R, c - R @ c + np.asarray(shift, dtype=float))

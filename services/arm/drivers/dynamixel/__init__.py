@@ -1,4 +1,4 @@
-"""DYNAMIXEL backend (Protocol 2.0 over dynamixel-sdk, X and P series) and an emulated bus for tests.
+"""DYNAMIXEL backend (Protocol 2.0 over dynamixel-sdk, X and P series), on a real or an emulated bus.
 
 Options: ``robot_config`` (YAML, default: PAPRAS), ``port``/``baud`` (override the file's), and
 ``emulate_bus``: run the real driver against an emulated P-series bus whose servo positions drive the
