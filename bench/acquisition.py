@@ -32,6 +32,7 @@ from common import keys
 from common.client import request_sync
 from common.launcher import ServiceGroup
 from common.messages import Request
+from common.session_folder import REPORT_FILE
 from services.cell import cell_specs
 
 PROFILE = "realistic"
@@ -94,7 +95,7 @@ def true_turns(out: Path) -> dict[str, Any]:
 def score_session(out: Path, *, seconds: float | None = None, status: str | None = None,
                   error: dict | None = None) -> dict[str, Any]:
     """The figures of one finished session folder (its report.json and journal.json)."""
-    report = json.loads((out / "report.json").read_text()) if (out / "report.json").is_file() else {}
+    report = json.loads((out / REPORT_FILE).read_text()) if (out / REPORT_FILE).is_file() else {}
     journal = json.loads((out / "journal.json").read_text())
     acc = report.get("accuracy", {})
     model = report.get("model_figures", {})

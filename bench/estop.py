@@ -224,7 +224,7 @@ def run(quick: bool = False, arm_backend: str = "sim", emulate_bus: bool = False
 
         write_faults(fault_file, {})
         specs = [sp if sp.service != "arm" else ProcessSpec(
-            sp.module, ["--backend", "dynamixel", "--emulate-bus"], service="arm",
+            sp.module, ["--backend", "dynamixel", "--option", "emulate_bus=true"], service="arm",
             env={FAULT_FILE_ENV: str(fault_file)}) for sp in specs]
     scenarios: dict[str, Any] | None = None
     with ServiceGroup(log_dir=work) as group:

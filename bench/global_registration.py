@@ -31,7 +31,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from common.geometry import invert, make_transform, rotation_about_line, transform_error, transform_points
-from services.registration.api import global_register, refine_icp
+from services.registration.api import global_register, refine_icp, to_o3d
 
 METHODS = ("4pcs", "fpfh_ransac", "fgr")
 SUCCESS_DEG = 5.0
@@ -120,9 +120,7 @@ def _local_refinement(case: Case, T: np.ndarray) -> tuple[np.ndarray, float]:
     reg = o3d.pipelines.registration
 
     def cloud(xyz: np.ndarray, rgb: np.ndarray, voxel: float) -> o3d.geometry.PointCloud:
-        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz))
-        pcd.colors = o3d.utility.Vector3dVector(np.asarray(rgb, dtype=np.float64) / 255.0)
-        pcd = pcd.voxel_down_sample(voxel)
+        pcd = to_o3d(xyz, rgb).voxel_down_sample(voxel)
         pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2.5 * voxel, max_nn=30))
         return pcd
 

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 
+from common.session_folder import SESSION_FILE
 from services.sim.errors import SimInputError
 
 PROFILE = "harsh"
@@ -156,7 +157,7 @@ def session_for(name: str, folder: Path, seed: int = 0, views: int = 12, scans_p
     from services.sim.scenario import simulated_views, write_session
 
     session = folder / f"{name}_harsh_session"
-    if (session / "session.json").is_file():
+    if (session / SESSION_FILE).is_file():
         return session
     mesh = write_mesh(name, folder / "meshes")
     frames = simulated_views(str(mesh), views=views, scans_per_view=scans_per_view, profile=PROFILE, seed=seed)

@@ -38,6 +38,8 @@ from typing import Any
 import numpy as np
 import open3d as o3d
 
+from common.session_folder import REPORT_FILE, SESSION_FILE
+
 VOXEL = 0.002  # m: the tutorial's voxel scaled from rooms to objects
 COARSE = 15 * VOXEL  # the tutorial's coarse and fine correspondence distances, in voxels
 FINE = 1.5 * VOXEL
@@ -108,9 +110,9 @@ def multiway(clouds: list[o3d.geometry.PointCloud], priors: list[np.ndarray]) ->
 def run_peer(out: Path, session: Path, model: Path) -> dict[str, Any]:
     """Register and fuse the views of one ``objscan reconstruct`` output; write the model; its figures."""
     t0 = time.perf_counter()
-    report = json.loads((out / "report.json").read_text())
+    report = json.loads((out / REPORT_FILE).read_text())
     turns = {int(v["index"]): float(v.get("commanded_turn_deg", 0.0))
-             for v in json.loads((session / "session.json").read_text())["views"]}
+             for v in json.loads((session / SESSION_FILE).read_text())["views"]}
     items = {int(v["index"]): v for v in report.get("views", []) if "error" not in v and v.get("ply")}
     order = sorted(items)
     full = [o3d.io.read_point_cloud(str(out / items[k]["ply"])) for k in order]

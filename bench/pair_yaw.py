@@ -39,11 +39,11 @@ def session_views(session: Path) -> tuple[list, np.ndarray]:
     """(dynamic views with their true motion, ground-truth points in view 0's base) of a recorded session;
     the static stage's output is cached in ``SESSION/dynamic_views.pkl``."""
     from bench.dynamic import _gt, static_views
-    from common.session_folder import read_scan
+    from common.session_folder import SESSION_FILE, read_scan
 
     session = Path(session)
     cache = session / "dynamic_views.pkl"
-    meta = json.loads((session / "session.json").read_text())
+    meta = json.loads((session / SESSION_FILE).read_text())
     name = meta.get("object")
     frames = None
     if cache.is_file():

@@ -43,6 +43,8 @@ from typing import Any
 
 import numpy as np
 
+from common.session_folder import MODEL_FILE
+
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
 CASTARD_INTRINSICS = "597.522,597.522,312.885,239.870"  # from the sequence's README (D415 color stream)
 KLEENEX_INTRINSICS = "570.3,570.3,320,240"  # the dataset authors' constants (the sequence's README)
@@ -105,7 +107,7 @@ def run_sequence(name: str, source: Path, intrinsics: str | None, quick: bool, o
                    configuration=model["configuration"], min_posed_fitness=model["consistency"]["min_posed_fitness"],
                    model_points=model["points"])
         if picture:
-            row["picture"] = _picture(model_dir / "model.ply", model_dir / "model.png").name
+            row["picture"] = _picture(model_dir / MODEL_FILE, model_dir / "model.png").name
     row["status"], row["reason"] = judge(row)
     row.update(import_seconds=round(t_import, 1), total_seconds=round(time.perf_counter() - t0, 1),
                session=session.name, imported=imp)  # by name: the folder is this machine's

@@ -53,6 +53,8 @@ from typing import Any
 
 import numpy as np
 
+from common.session_folder import MODEL_FILE, REPORT_FILE, SESSION_FILE
+
 OBJECTS = ("milk", "alphabet_soup", "tomato_sauce")
 PROFILE = "realistic"
 SETS = ("harsh", "realistic")
@@ -123,7 +125,7 @@ def oracle_chamfer(session: Path, out: Path, name: str, peer_model: Path | None 
                                  center=np.zeros(3), commanded_turn_deg=0.0,
                                  T_view0_view_true=T0 @ invert(_truth(session, k))))
     oracle = fuse(views, oracle_poses(views, gt), 0.001).xyz
-    model = read_ply(out / "model.ply").xyz
+    model = read_ply(out / MODEL_FILE).xyz
     scores = (_chamfer(np.asarray(model, dtype=float), gt), _chamfer(np.asarray(oracle, dtype=float), gt))
     if peer_model is None:
         return scores
@@ -135,7 +137,7 @@ def session_for(name: str, folder: Path, seed: int = 0) -> Path:
     from services.sim.scenario import simulated_views, write_session
 
     session = folder / f"{name}_session"
-    if (session / "session.json").is_file():
+    if (session / SESSION_FILE).is_file():
         return session
     return write_session(session, simulated_views(name, views=12, scans_per_view=3, profile=PROFILE, seed=seed))
 
@@ -182,9 +184,9 @@ def measure(name: str, tmp: Path, sessions: Path, env: dict[str, str], seed: int
     row: dict[str, Any] = {"set": object_set, "object": name, **run_cli(session, out, truth, env)}
     row["load_average_1min"] = [round(load, 2), round(os.getloadavg()[0], 2)]  # before and after the CLI
     row["seconds"] = row["wall_s"]
-    if not (out / "report.json").is_file() or not (out / "model.ply").is_file():
+    if not (out / REPORT_FILE).is_file() or not (out / MODEL_FILE).is_file():
         return row  # no model: nothing to score (the exit code and stderr say why)
-    report = json.loads((out / "report.json").read_text())
+    report = json.loads((out / REPORT_FILE).read_text())
     views = report.get("views", [])
     scans = [s for v in views for s in v.get("scans", [])[1:] if isinstance(s, dict)]
     model = report.get("model") or {}

@@ -21,7 +21,7 @@ import open3d as o3d
 
 from common.geometry import invert, look_at, make_transform, rotation_about_axis
 from common.messages import Plane, d435_intrinsics
-from services.registration.api import DynamicRegistrationError, DynamicView
+from services.registration.api import DynamicRegistrationError, DynamicView, to_o3d
 from services.sim.catalogue import SimObject, load_object
 from services.sim.errors import SimError
 from services.sim.profiles import get_profile
@@ -140,9 +140,7 @@ def synthetic_views(object_name: str, views: int = 12, scans_per_view: int = 3,
         xyz = np.vstack([p[0] for p in parts])
         rgb = np.vstack([p[1] for p in parts])
         keep = xyz[:, 2] > TABLE_CUT_M
-        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz[keep]))
-        pcd.colors = o3d.utility.Vector3dVector(rgb[keep] / 255.0)
-        pcd = pcd.voxel_down_sample(voxel)
+        pcd = to_o3d(xyz[keep], rgb[keep]).voxel_down_sample(voxel)
         pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.006, max_nn=30))
         eye = np.mean([c[:3, 3] for c in cams], axis=0)
         pcd.orient_normals_towards_camera_location(eye)

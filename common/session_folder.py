@@ -6,6 +6,8 @@ Layout (documented in docs/session-folder.md)::
     SESSION/view_KK/scan_J/color.png           8-bit RGB
     SESSION/view_KK/scan_J/depth.png           16-bit depth, metres = value * depth_scale
     SESSION/view_KK/scan_J/meta.json           intrinsics, depth_scale, T_base_camera (+ ground truth in sim)
+    SESSION/model.ply, SESSION/report.json     the result: the model and the run's figures (``MODEL_FILE``,
+                                               ``REPORT_FILE``), written by whoever registers the views
 
 The orchestrator writes it as it captures, the camera's replay backend and ``objscan reconstruct`` read
 it. Every file is written atomically (``common.atomic``: unique temporary name, fsync, rename, folder
@@ -29,6 +31,10 @@ from common.errors import ObjscanError
 from common.messages import Intrinsics, RGBDFrame
 
 SESSION_FILE = "session.json"
+MODEL_FILE = "model.ply"
+"""The registered model (binary PLY, colors and normals) a finished run leaves in its folder."""
+REPORT_FILE = "report.json"
+"""The run's figures and decisions, beside the model (docs/session-folder.md)."""
 __all__ = ["atomic_write_bytes", "atomic_write_json"]  # re-exported: the one atomic writer is common.atomic
 
 

@@ -34,6 +34,7 @@ from common.api import ViewResult
 from common.errors import ObjscanError
 from common.messages import Plane, PointCloud, RGBDFrame
 from common.session_folder import (
+    MODEL_FILE,
     atomic_write_json,
     new_folder_refusal,
     read_scan,
@@ -214,4 +215,4 @@ class SessionStore:
         return json.loads(p.read_text()) if p.is_file() else None
 
     def save_model(self, cloud: PointCloud) -> Path:
-        return write_ply(self.path / "model.ply", cloud)
+        return write_ply(self.path / MODEL_FILE, cloud)

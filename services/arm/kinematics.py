@@ -23,9 +23,8 @@ import pinocchio as pin
 
 from common.geometry import as_rigid_transform
 from services.arm.errors import BadCommand, IKError
-from services.arm.robot import MESH_PACKAGE_DIR, URDF_PATH
+from services.arm.robot import JOINT_NAMES, MESH_PACKAGE_DIR, URDF_PATH
 
-ARM_JOINTS = tuple(f"robot1/joint{i}" for i in range(1, 7))
 FINGER_JOINTS = ("robot1/gripper", "robot1/gripper_r2", "robot1/gripper_l1", "robot1/gripper_l2")
 # mimic multipliers of the finger joints relative to robot1/gripper (from the URDF's <mimic> tags)
 FINGER_MIMIC = (1.0, 1.0 / 1.1, 1.0, 1.0 / 1.1)
@@ -123,12 +122,12 @@ class Kinematics:
         self.full_model: pin.Model = pin.buildModelFromUrdf(urdf)
         lock = [self.full_model.getJointId(n) for n in FINGER_JOINTS]
         self.model: pin.Model = pin.buildReducedModel(self.full_model, lock, pin.neutral(self.full_model))
-        if [self.model.names[i] for i in range(1, self.model.njoints)] != list(ARM_JOINTS):
+        if [self.model.names[i] for i in range(1, self.model.njoints)] != list(JOINT_NAMES):
             raise RuntimeError(f"unexpected arm joints in {urdf}")
         self.data = self.model.createData()
         self.full_data = self.full_model.createData()
         self.nq = self.model.nq
-        self.joint_names = list(ARM_JOINTS)
+        self.joint_names = list(JOINT_NAMES)
         self.lower = self.model.lowerPositionLimit.copy()
         self.upper = self.model.upperPositionLimit.copy()
         self.velocity_limit = self.model.velocityLimit.copy()

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from common.atomic import atomic_write_bytes
+from common.session_folder import REPORT_FILE
 from services.cli.cmd_scan import console
 from services.cli.outcome import FAILED, OK, error_line, print_json, require_path, warn_unaccepted
 
@@ -85,13 +86,13 @@ def run(args) -> int:  # noqa: ANN001
         report["accuracy"] = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in metrics.items()}
         report["accuracy"]["gt_posed_from_session"] = posed
     report["seconds_total"] = round(time.perf_counter() - t0, 3)
-    atomic_write_bytes(out / "report.json", json.dumps(report, indent=2, default=float).encode())
+    atomic_write_bytes(out / REPORT_FILE, json.dumps(report, indent=2, default=float).encode())
     if model is None:
         err = (figures or {}).get("error") or {"code": "no_model", "message": "no model was built", "detail": {}}
         print(error_line("reconstruct", f"no model: {err['message']}", err["code"]), file=sys.stderr)
         if args.json_output:
             print_json({"error": err, "accepted": False, "why": report.get("why", ""),
-                        "report": str(out / "report.json")})
+                        "report": str(out / REPORT_FILE)})
         return FAILED
     acc = report.get("accuracy", {})
     console.print(f"model: {model}; {report['seconds_total']:.1f} s"
@@ -104,5 +105,5 @@ def run(args) -> int:  # noqa: ANN001
     if args.json_output:
         print_json({"model": str(model), "accepted": bool(report.get("accepted", True)), "why": report.get("why", ""),
                     "views_left_out": figures.get("views_left_out", []), "accuracy": acc or None,
-                    "seconds": report["seconds_total"], "report": str(out / "report.json")})
+                    "seconds": report["seconds_total"], "report": str(out / REPORT_FILE)})
     return OK

@@ -18,7 +18,7 @@ import numpy as np
 
 from common.errors import ObjscanError
 from common.messages import RGBDFrame
-from common.session_folder import read_scan, read_session, view_dir
+from common.session_folder import MODEL_FILE, REPORT_FILE, read_scan, read_session, view_dir
 from services.export.errors import ExportInputError
 from services.registration.api import read_ply
 
@@ -76,11 +76,11 @@ def load_session_model(session: str | Path) -> SessionModel:
         info = read_session(path)
     except ObjscanError as exc:
         raise ExportInputError(exc.message, code="bad_session", detail={"session": str(path)}) from None
-    if not (path / "model.ply").is_file():
+    if not (path / MODEL_FILE).is_file():
         raise ExportInputError(f"{path} holds no model.ply (did the acquisition finish?)", code="no_model",
                                detail={"session": str(path)})
-    cloud = read_ply(path / "model.ply")
-    report = _json(path / "report.json") or {}
+    cloud = read_ply(path / MODEL_FILE)
+    report = _json(path / REPORT_FILE) or {}
     figures = report.get("model_figures") or report.get("model") or {}
     poses = figures.get("T_model_view") if isinstance(figures, dict) else None
     used = figures.get("views_used") if isinstance(figures, dict) else None

@@ -37,9 +37,11 @@ from services.library.errors import BadModelInput
 from services.registration.api import (
     ColorICPConfig,
     FeatureMatchConfig,
+    chromaticity,
     colored_icp,
     fpfh_features,
     ransac_feature_match,
+    to_o3d,
 )
 
 
@@ -160,23 +162,15 @@ def _query_arrays(cloud: np.ndarray | PointCloud | str | Path, rgb: np.ndarray |
     return xyz, rgb
 
 
-def _chroma(rgb: np.ndarray) -> np.ndarray:
-    s = rgb.sum(axis=1, keepdims=True)
-    return np.where(s > 1e-6, rgb / np.maximum(s, 1e-6), 1.0 / 3.0)
-
-
 def _prepare(xyz: np.ndarray, rgb: np.ndarray | None, cfg: FindConfig) -> _Prepared:
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(xyz))
-    if rgb is not None:
-        pcd.colors = o3d.utility.Vector3dVector(np.clip(rgb / 255.0, 0.0, 1.0))
-    pcd = pcd.voxel_down_sample(cfg.voxel)
+    pcd = to_o3d(xyz, None if rgb is None else np.clip(rgb, 0.0, 255.0)).voxel_down_sample(cfg.voxel)
     if len(pcd.points) < cfg.min_points:
         raise BadModelInput(f"cloud has only {len(pcd.points)} points at voxel {cfg.voxel} m",
                             code="too_few_points", detail={"points": len(pcd.points)})
     pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2.5 * cfg.voxel, max_nn=30))
     fpfh = fpfh_features(pcd, cfg.voxel, cfg.features)
     pts = np.asarray(pcd.points)
-    chroma = _chroma(np.asarray(pcd.colors)) if pcd.has_colors() else None
+    chroma = chromaticity(255.0 * np.asarray(pcd.colors)) if pcd.has_colors() else None
     return _Prepared(pcd, fpfh, pts, chroma, cKDTree(pts))
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from common.atomic import sha256_file
+from common.session_folder import MODEL_FILE, REPORT_FILE, SESSION_FILE
 from services.library.errors import BadModelInput
 from services.library.metadata import ModelMetadata
 from services.library.store import MESH_FILE, ModelEntry, ModelLibrary
@@ -25,12 +26,12 @@ ACCURACY_KEYS = ("chamfer_mm", "accuracy_mm", "completeness_mm", "fscore_2mm", "
 def session_metadata(session_dir: str | Path) -> ModelMetadata:
     """Metadata for the model of ``session_dir``: object, date, session, configuration, quality figures."""
     session = Path(session_dir).resolve()
-    model = session / "model.ply"
+    model = session / MODEL_FILE
     if not model.is_file():
         raise BadModelInput(f"{session} holds no model.ply (did the acquisition finish?)", code="no_model",
                             detail={"session": str(session)})
-    info = _json(session / "session.json")
-    report = _json(session / "report.json")
+    info = _json(session / SESSION_FILE)
+    report = _json(session / REPORT_FILE)
     journal = _json(session / "journal.json")
     figures = report.get("model_figures") or (report.get("model") if isinstance(report.get("model"), dict) else {})
     quality: dict[str, Any] = {"points": report.get("points", figures.get("points"))}
@@ -92,7 +93,7 @@ def add_session_model(library_root: str | Path, session_dir: str | Path, *, allo
                 entry.metadata.extra.get("model_sha256") == meta.extra["model_sha256"]:
             _attach_newer(lib, entry, mesh, asset)
             return entry.id
-    return lib.add(Path(session_dir) / "model.ply", meta, mesh=mesh, asset=asset,
+    return lib.add(Path(session_dir) / MODEL_FILE, meta, mesh=mesh, asset=asset,
                    allow_unaccepted=allow_unaccepted)
 
 

@@ -65,7 +65,7 @@ import open3d as o3d
 
 from common.atomic import atomic_write_bytes, atomic_write_with, fsync_dir, fsync_file, sha256_file, write_synced
 from common.messages import PointCloud
-from common.session_folder import json_default
+from common.session_folder import MODEL_FILE, json_default
 from services.library.descriptors import DescriptorConfig, check_xyz, model_descriptors
 from services.library.errors import BadModelInput, LibraryError, ModelNotFound, UnacceptedModel
 from services.library.matching import find as find_matches
@@ -79,7 +79,6 @@ ENTRIES = "entries"
 STAGING = ".staging"
 TRASH = ".trash"
 LOCK = ".lock"
-MODEL_FILE = "model.ply"
 MESH_FILE = "mesh.ply"
 ASSET_DIR = "asset"
 DESCRIPTORS_FILE = "descriptors.npz"

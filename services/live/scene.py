@@ -26,7 +26,7 @@ import numpy as np
 
 from common.api import GraspPlanReply, GripperRequest, ModelResult, MoveRequest, MoveResult, ViewResult
 from common.messages import Error, JointState, Ok, PointCloud, RGBDFrame
-from services.arm.drivers.base import JOINT_NAMES
+from services.arm.robot import JOINT_NAMES
 
 CLOSE_BELOW_M = 0.005  # a gripper command below this opening is a close: the grasp is chosen
 

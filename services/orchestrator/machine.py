@@ -42,7 +42,7 @@ from common.errors import ObjscanError, RemoteError
 from common.log import event
 from common.messages import Grasp
 from common.pose_accuracy import PoseAccuracy
-from common.session_folder import scan_dir, view_dir
+from common.session_folder import REPORT_FILE, scan_dir, view_dir
 from services.arm.drivers.dynamixel.robot_file import robot_pose_accuracy
 from services.orchestrator.cell import Cell
 from services.orchestrator.config import AcquisitionConfig
@@ -934,7 +934,7 @@ class Acquisition:
                        "timings_s": self.j.timings_s, "seconds_total": round(time.time() - self.j.started, 2),
                        "decisions": self.j.decisions,
                        "views": [self.store.load_json(f"view_{k:02d}/view.json").get("figures", {}) for k in range(n)]})
-        self.store.save_json("report.json", report)
+        self.store.save_json(REPORT_FILE, report)
         if self.library is not None:
             try:
                 from services.library import add_session_model

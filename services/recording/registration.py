@@ -24,7 +24,7 @@ from common.api import DynamicRequest, ModelResult, StaticRequest, ViewResult
 from common.atomic import atomic_write_bytes
 from common.messages import PointCloud, RGBDFrame
 from common.pose_accuracy import session_pose_accuracy
-from common.session_folder import read_scan, read_session, write_scan
+from common.session_folder import MODEL_FILE, read_scan, read_session, write_scan
 from services.recording.compare import compare_models
 from services.recording.errors import RecordingError
 from services.recording.reader import read_recording
@@ -91,7 +91,7 @@ def inputs_from_folder(session_dir: str | Path) -> RegistrationInputs:
     views = {k: f for k, f in views.items() if f}
     if not views:
         raise RecordingError(f"{session_dir} has no complete scan to register")
-    model_path = info.path / "model.ply"
+    model_path = info.path / MODEL_FILE
     accuracy, stated = session_pose_accuracy(info.data)
     return RegistrationInputs(views=views, static_profile=str(cfg.get("static_profile", "default")),
                               turns_deg={k: info.commanded_turn_deg(k) for k in views},
@@ -129,7 +129,7 @@ def replay_registration(source: str | Path, out_dir: str | Path, *, static_profi
     say = progress or (lambda _m: None)
     inputs = registration_inputs(source)
     out = Path(out_dir)
-    if (out / "model.ply").exists():
+    if (out / MODEL_FILE).exists():
         raise RecordingError(f"{out} already holds a model; choose an empty folder", detail={"out": str(out)})
     store = SessionStore(out)
     profile = static_profile or inputs.static_profile
@@ -164,7 +164,7 @@ def replay_registration(source: str | Path, out_dir: str | Path, *, static_profi
         if inputs.recorded_model is not None:
             from services.registration.api import read_ply
 
-            replayed = read_ply(out / "model.ply")  # compare what is on disk, as the recorded model.ply
+            replayed = read_ply(out / MODEL_FILE)  # compare what is on disk, as the recorded model.ply
             recorded = _as_saved(inputs.recorded_model, out)
             report["comparison"] = compare_models(recorded, replayed, tolerance_mm)
     timings["total"] = round(time.perf_counter() - t0, 3)

@@ -24,6 +24,7 @@ from common.client import request_sync
 from common.errors import ObjscanError
 from common.launcher import ProcessSpec, ServiceGroup
 from common.messages import Health, Ok, Request
+from common.session_folder import MODEL_FILE
 from services.recording.compare import compare_models
 from services.recording.errors import RecordingError
 from services.recording.reader import read_recording
@@ -104,7 +105,7 @@ def replay_session(source: str | Path, out_dir: str | Path, *, atol: float = 1e-
         report["arm"] = _health(group, "arm")
     report["seconds"] = round(time.time() - t0, 2)
     recorded = _recorded_model(rec)
-    model_path = out / "model.ply"
+    model_path = out / MODEL_FILE
     if recorded is not None and model_path.is_file():
         from services.registration.api import read_ply, write_ply
 

@@ -32,6 +32,7 @@ from common.codec import Message
 from common.errors import ObjscanError
 from common.messages import Error, JointState, Ok
 from common.runtime import COMMAND_BUDGET, QueryContext, Service, run_service, service_arg_parser, settings_from_args
+from services.arm.robot import JOINT_NAMES
 from services.recording.errors import ReplayDiverged, ReplayExhausted
 from services.recording.reader import Exchange, read_recording
 
@@ -169,7 +170,7 @@ class ReplayCellService(Service):
         reply = self.replies.answer(ctx.key, msg)
         q = getattr(reply, "q", None)
         if self.role == "arm" and q is not None and getattr(reply, "T_base_gripper", None) is not None:
-            self.last_state = JointState(names=[f"robot1/joint{i}" for i in range(1, 7)][:len(q)],
+            self.last_state = JointState(names=list(JOINT_NAMES[:len(q)]),
                                          position=np.asarray(q, np.float64), T_base_gripper=reply.T_base_gripper,
                                          T_base_camera=reply.T_base_camera)
             self.state_pub.put(self.last_state)

@@ -72,8 +72,9 @@ _EXPORTS: dict[str, str] = {
     **dict.fromkeys(("reconstruct", "default_workers"), "reconstruct"),
     **dict.fromkeys(("chamfer_metrics", "evaluate_model", "point_errors", "sample_mesh", "view_agreement"),
                     "evaluation"),
-    **dict.fromkeys(("CloudError", "check_frame", "downsample", "estimate_normals", "frame_points", "frame_to_cloud",
-                     "from_o3d", "o3d_seeded", "read_ply", "to_o3d", "transform_cloud", "write_ply"), "cloud"),
+    **dict.fromkeys(("CloudError", "check_frame", "chromaticity", "downsample", "estimate_normals", "frame_points",
+                     "frame_to_cloud", "from_o3d", "o3d_seeded", "read_ply", "to_o3d", "transform_cloud", "write_ply"),
+                    "cloud"),
     **dict.fromkeys(("ColorICPConfig", "FeatureMatchConfig", "colored_icp", "fpfh_features", "mean_spacing",
                      "overlap_only", "ransac_feature_match"), "blocks"),
     # the dynamic stage's steps one at a time (the same functions ``build_model`` runs), so a step can be

@@ -174,6 +174,19 @@ def _check_xyz(xyz: np.ndarray, what: str = "xyz") -> np.ndarray:
     return arr
 
 
+def chromaticity(rgb: np.ndarray) -> np.ndarray:
+    """(N, 3) chromaticity r, g, b / (r + g + b) of colours on the 0-255 scale (uint8, or averaged floats).
+
+    The ratio does not change with brightness, so colours compare across shading and lighting. One count is
+    added to each channel first: an 8-bit camera's dark pixels are mostly quantisation noise, and without it
+    (0, 0, 2) would read as saturated blue, (2, 0, 0) as saturated red: an L1 difference of 2, the largest there
+    is, between two nearly black points. With it they differ by 0.8, black is neutral grey (1/3 each) and a
+    colour moves continuously toward grey as it darkens, so no cut-off for "too dark" is needed.
+    """
+    c = np.asarray(rgb, dtype=np.float64).reshape(-1, 3) + 1.0
+    return c / c.sum(axis=1, keepdims=True)
+
+
 def to_o3d(
     xyz: np.ndarray | PointCloud, rgb: np.ndarray | None = None, normals: np.ndarray | None = None
 ) -> o3d.geometry.PointCloud:

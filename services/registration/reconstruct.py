@@ -22,7 +22,7 @@ import numpy as np
 
 from common.errors import ObjscanError
 from common.pose_accuracy import session_pose_accuracy
-from common.session_folder import atomic_write_json, read_scan, read_session
+from common.session_folder import MODEL_FILE, REPORT_FILE, atomic_write_json, read_scan, read_session
 from services.registration.api import session_dynamic_config
 from services.registration.cloud import write_ply
 from services.registration.dynamic.model import MapPairs, build_model
@@ -105,7 +105,7 @@ def reconstruct(
         map_pairs = (lambda jobs: list(pool.map(register_pair, jobs))) if pool is not None else None
         report["model"] = run_dynamic_stage(results, session, out, report, progress, map_pairs=map_pairs,
                                             config=dynamic)
-    atomic_write_json(out / "report.json", report)
+    atomic_write_json(out / REPORT_FILE, report)
     return report
 
 
@@ -119,7 +119,7 @@ def remove_stale_results(out: Path, session_path: Path) -> list[Path]:
     """
     if out.resolve() == Path(session_path).resolve():
         return []
-    stale = [out / "model.ply", *sorted((out / "views").glob("view_*.ply"))]
+    stale = [out / MODEL_FILE, *sorted((out / "views").glob("view_*.ply"))]
     removed = []
     for path in stale:
         if path.is_file():
@@ -242,7 +242,7 @@ def run_dynamic_stage(
         report["accepted"], report["why"] = False, f"no model: {exc.message} [{exc.code}]"
         return {"error": {"code": exc.code, "message": exc.message, "detail": exc.detail},
                 "views_used": order, "seconds": round(time.perf_counter() - t0, 4)}
-    ply = model.write_ply(Path(out_dir) / "model.ply")
+    ply = model.write_ply(Path(out_dir) / MODEL_FILE)
     unsure = imported_turn_misses(session.data)  # an unsure import never yields an accepted model
     if unsure:
         model.accepted, model.why = False, "; ".join([m for m in (model.why,) if m] + unsure)

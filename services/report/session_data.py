@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from common.messages import PointCloud
-from common.session_folder import SessionFolderError, read_scan_dir, read_session, scan_dir
+from common.session_folder import MODEL_FILE, REPORT_FILE, SessionFolderError, read_scan_dir, read_session, scan_dir
 from services.registration.api import CloudError, read_ply
 from services.report.errors import ReportError
 
@@ -68,13 +68,13 @@ def load_session(session_dir: str | Path) -> SessionData:
     except SessionFolderError as exc:
         raise ReportError(exc.message, code="bad_session", detail={"session": str(path)}) from None
     journal = _json(path / "journal.json")
-    report = _json(path / "report.json")
+    report = _json(path / REPORT_FILE)
     decisions = report.get("decisions") or journal.get("decisions") or []
     views = [_view(path, v, decisions) for v in session.views]
     figures = report.get("model_figures")
     if figures is None and isinstance(report.get("model"), dict):
         figures = report["model"]  # objscan reconstruct's report.json
-    model = _cloud(path / "model.ply")
+    model = _cloud(path / MODEL_FILE)
     return SessionData(path=path, info=session.data, journal=journal, report=report, views=views, model=model,
                        model_figures=figures or {}, accuracy=report.get("accuracy"),
                        timings_s=report.get("timings_s") or journal.get("timings_s") or {}, decisions=decisions)

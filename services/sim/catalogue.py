@@ -189,12 +189,10 @@ class SimObject:
 
     def gt_point_cloud(self, n: int, seed: int = 0) -> o3d.geometry.PointCloud:
         """Colored, normal-carrying ground-truth cloud in the object frame (Open3D legacy)."""
+        from services.registration.api import to_o3d
+
         pts, tri, bary = self.sample_surface(n, seed)
-        normals = self.triangle_normals()[tri]
-        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
-        pcd.colors = o3d.utility.Vector3dVector(self.surface_colors(tri, bary) / 255.0)
-        pcd.normals = o3d.utility.Vector3dVector(normals)
-        return pcd
+        return to_o3d(pts, self.surface_colors(tri, bary), self.triangle_normals()[tri])
 
     # -- appearance -------------------------------------------------------------------------------------
     def surface_colors(self, triangle_ids: np.ndarray, bary: np.ndarray) -> np.ndarray:

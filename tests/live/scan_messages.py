@@ -12,7 +12,7 @@ from common import keys
 from common.api import GraspPlanReply, GripperRequest, ModelResult, MoveRequest, MoveResult, ViewResult
 from common.codec import decode
 from common.messages import Grasp, Intrinsics, JointState, Ok, Plane, PointCloud, Pose, RGBDFrame
-from services.arm.drivers.base import JOINT_NAMES
+from services.arm.robot import JOINT_NAMES
 
 R = keys.DEFAULT_ROBOT
 

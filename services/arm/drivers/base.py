@@ -18,8 +18,8 @@ import numpy as np
 
 from services.arm.errors import BadCommand, DriverError
 from services.arm.motion import JointTrajectory
+from services.arm.robot import JOINT_NAMES
 
-JOINT_NAMES = tuple(f"robot1/joint{i}" for i in range(1, 7))
 # a camera-up posture clear of the table: where the twin starts, and every backend's home unless configured
 HOME_Q = (0.0, -0.3, -0.9, 0.0, 1.2, 0.0)
 

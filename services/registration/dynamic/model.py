@@ -28,6 +28,7 @@ import numpy as np
 import open3d as o3d
 
 from common.atomic import atomic_write_with
+from services.registration.cloud import to_o3d
 from services.registration.dynamic.combine import (
     CombineConfig,
     chain_poses,
@@ -126,7 +127,7 @@ class RegisteredModel:
         return int(self.xyz.shape[0])
 
     def to_o3d(self) -> o3d.geometry.PointCloud:
-        return Cloud(self.xyz, self.rgb, self.normals).to_o3d()
+        return to_o3d(self.xyz, self.rgb, self.normals)
 
     def write_ply(self, path: str | Path) -> Path:
         """Binary PLY with colors and normals, written atomically: a reader sees the old model or this one."""

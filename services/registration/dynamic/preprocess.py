@@ -24,7 +24,7 @@ import open3d as o3d
 from sklearn.cluster import KMeans
 
 from common.geometry import make_transform, rotation_about_line
-from services.registration.cloud import to_o3d
+from services.registration.cloud import from_o3d, to_o3d
 from services.registration.dynamic.views import DynamicRegistrationError, DynamicView, validate_views
 
 
@@ -75,12 +75,14 @@ class Cloud:
 
     @classmethod
     def from_o3d(cls, pcd: o3d.geometry.PointCloud) -> Cloud:
-        nrm = np.asarray(pcd.normals) if pcd.has_normals() else np.zeros((len(pcd.points), 3))
+        """``cloud.from_o3d``'s arrays, normals made unit length (zero where there are none)."""
+        wire = from_o3d(pcd)
+        n = len(wire.xyz)
+        nrm = np.asarray(pcd.normals) if pcd.has_normals() else np.zeros((n, 3))  # unit length in float64 first
         norm = np.linalg.norm(nrm, axis=1, keepdims=True)
         nrm = np.where(norm > 1e-9, nrm / np.maximum(norm, 1e-9), nrm)
-        return cls(np.asarray(pcd.points, dtype=np.float32),
-                   np.clip(np.asarray(pcd.colors) * 255.0 + 0.5, 0, 255).astype(np.uint8),
-                   nrm.astype(np.float32))
+        rgb = wire.rgb if wire.rgb is not None else np.zeros((n, 3), np.uint8)
+        return cls(wire.xyz, rgb, nrm.astype(np.float32))
 
     def downsampled(self, voxel: float) -> Cloud:
         return Cloud.from_o3d(self.to_o3d().voxel_down_sample(voxel)) if voxel > 0 else self

@@ -23,6 +23,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from common.geometry import make_transform, rotation_about_axis, yaw_deg_about
+from services.registration.cloud import chromaticity
 from services.registration.dynamic.preprocess import Cloud
 
 
@@ -97,10 +98,9 @@ class _Target:
 
 
 def chroma(rgb: np.ndarray) -> np.ndarray:
-    """(N, 4): chromaticity r, g, b (summing to 1) and log-brightness, for shading-tolerant colour checks."""
-    c = np.asarray(rgb, dtype=np.float64) + 1.0
-    s = c.sum(axis=1, keepdims=True)
-    return np.column_stack([c / s, np.log(s[:, 0])])
+    """(N, 4): ``chromaticity`` r, g, b (summing to 1) and log-brightness, for shading-tolerant colour checks."""
+    s = np.asarray(rgb, dtype=np.float64).reshape(-1, 3).sum(axis=1) + 3.0  # the brightness chromaticity divides by
+    return np.column_stack([chromaticity(rgb), np.log(s)])
 
 
 def _score(src_xyz: np.ndarray, src_rgb: np.ndarray, tgt: _Target, distance: float, tol: float,

@@ -17,9 +17,9 @@ import yaml
 from common.pose_accuracy import CONSERVATIVE, POSE_ACCURACY_KEY, PoseAccuracy, PoseAccuracyError
 from services.arm.drivers.dynamixel.servo_config import GripperServoConfig, JointServoConfig
 from services.arm.errors import RobotConfigError
+from services.arm.robot import JOINT_NAMES
 
 DEFAULT_ROBOT_CONFIG = Path(__file__).resolve().parents[2] / "robot" / "papras_dynamixel.yaml"
-JOINT_NAMES = tuple(f"robot1/joint{i}" for i in range(1, 7))
 
 TOP_KEYS = {"port", "baudrate", "home", "shutdown", "settle_tolerance", "settle_timeout_s", "max_tracking_error",
             "profile_velocity_rad_s", "profile_acceleration_rad_s2", "joints", "gripper", "pose_accuracy"}
