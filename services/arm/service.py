@@ -21,12 +21,12 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
-import os
 
 import numpy as np
 
 from common import keys
 from common.api import GripperRequest, GripperResult, MoveRequest, MoveResult, SceneRequest
+from common.backend_options import option_pair
 from common.codec import Message
 from common.errors import InvalidRequest
 from common.messages import JointState, Ok, Request
@@ -45,9 +45,11 @@ class ArmService(Service):
         opts = self.settings.options
         self.backend = opts.get("backend", "sim")
         entry = driver_entry(self.backend)
+        entry.options(opts.get("backend_options") or {})  # a wrong key or value is said before anything starts
         config = ArmConfig(realtime=entry.realtime)
         kin = Kinematics(config.kinematics)
-        driver, _ = make_driver(self.backend, DriverContext(self.session, self.robot, kin, opts))
+        driver, _ = make_driver(self.backend, DriverContext(self.session, self.robot, kin,
+                                                            dict(opts.get("backend_options") or {})))
         self.arm = ArmController(driver, config, kinematics=kin)
         await self.run_cpu(self.arm.connect)
         # the state stream's bus reads: one thread, one read at a time, never on the event loop
@@ -168,6 +170,8 @@ class ArmService(Service):
         return self._joint_state()
 
     async def teardown(self) -> None:
+        if not hasattr(self, "arm"):  # the start failed before the driver was built: nothing to stop
+            return
         try:
             self.arm.estop()
         except Exception:  # noqa: BLE001 - shutting down: the servos hold or relax per the shutdown policy
@@ -191,15 +195,8 @@ def main() -> None:
     p = service_arg_parser("objscan arm service (PAPRAS: pinocchio IK, Ruckig motion, collision checks)")
     p.add_argument("--backend", choices=list(BACKENDS), default="sim",
                    help="arm driver (services/arm/drivers/registry.py; default: %(default)s)")
-    p.add_argument("--robot-config", default=os.environ.get("OBJSCAN_ROBOT_CONFIG"),
-                   help="dynamixel: robot configuration YAML (default: env OBJSCAN_ROBOT_CONFIG, else the PAPRAS "
-                        "one shipped in services/arm/robot/papras_dynamixel.yaml)")
-    p.add_argument("--port", help="dynamixel: serial port of the U2D2 (default: the robot configuration's)")
-    p.add_argument("--baud", type=int, help="dynamixel: bus baud rate (default: the robot configuration's)")
-    p.add_argument("--emulate-bus", action="store_true",
-                   help="dynamixel: an emulated bus of the configured servos whose positions drive the twin")
-    p.add_argument("--session", help="replay: session folder whose recorded joints to report")
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE", type=option_pair,
+                   help="a backend's own option (repeatable; its keys: services/arm/drivers/registry.py, "
+                        "docs/arm.md), e.g. dynamixel: --option port=/dev/ttyUSB0 --option emulate_bus=true")
     args = p.parse_args()
-    run_service(lambda: ArmService(settings_from_args(
-        args, backend=args.backend, port=args.port, baud=args.baud, session=args.session,
-        robot_config=args.robot_config, emulate_bus=args.emulate_bus)))
+    run_service(lambda: ArmService(settings_from_args(args, backend=args.backend, backend_options=dict(args.option))))

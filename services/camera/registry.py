@@ -3,17 +3,20 @@
 The same shape as the arm's (``services/arm/drivers/registry.py``), after LeRobot's ``cameras/``: a new
 backend is one folder under ``services/camera/`` whose ``__init__`` defines ``CAMERA = CameraEntry(...)``,
 plus one line in ``BACKENDS``. The service, the CLI and compose name backends from ``BACKENDS`` only; a
-folder is imported only when chosen, so the sim cell never needs pyrealsense2.
+folder is imported only when chosen, so the sim cell never needs pyrealsense2. A backend's options
+(``--option KEY=VALUE`` on the camera service) are the fields of its options dataclass
+(``common/backend_options.py``): the registry parses them, the backend never sees a string.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import importlib
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
+from common.backend_options import parse_options
 from services.camera.base import Camera, CameraConfig
 from services.camera.errors import CameraConfigError
 
@@ -41,11 +44,21 @@ class CameraEntry:
 
     name: str
     config_class: type[CameraConfig]
-    config_from_options: Callable[[dict[str, Any]], CameraConfig]
+    options_class: type
+    """The backend's ``--option`` keys with their types, defaults and help (``common/backend_options.py``)."""
+    build_config: Callable[[Any], CameraConfig]
     factory: Callable[[Any, CameraContext], Camera]
     description: str = ""
-    options: dict[str, str] = field(default_factory=dict)
-    """Service options the backend reads (name -> what it means), for ``--help`` and docs/extending.md."""
+
+    def options(self, given: Mapping[str, Any]) -> Any:
+        """``given`` (``--option`` strings or typed values) as this backend's options; ``unknown_option`` /
+        ``bad_option`` (``CameraConfigError``) name its valid keys."""
+        return parse_options(self.options_class, given, backend=f"camera backend {self.name}",
+                             error=CameraConfigError)
+
+    def config_from_options(self, given: Mapping[str, Any]) -> CameraConfig:
+        """The backend's config from its options (parsed, then built)."""
+        return self.build_config(self.options(given))
 
 
 def camera_entry(name: Any) -> CameraEntry:
@@ -98,10 +111,3 @@ def camera_from_options(name: str, options: dict[str, Any], context: CameraConte
     return entry.factory(entry.config_from_options(options), context), entry
 
 
-def backend_option(text: str) -> tuple[str, str]:
-    """``KEY=VALUE`` from the command line (``--option``) -> (key, value); the backend's
-    ``config_from_options`` converts the value, so a new backend needs no new flag."""
-    key, sep, value = text.partition("=")
-    if not sep or not key.strip():
-        raise ValueError(f"expected KEY=VALUE, got {text!r}")
-    return key.strip().replace("-", "_"), value

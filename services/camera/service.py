@@ -13,19 +13,18 @@ replay's, stamped when recorded, nor an unknown one); the frame's ``meta["hand_e
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
 from common import keys
 from common.api import CaptureRequest
+from common.backend_options import option_pair
 from common.codec import Message
 from common.errors import ObjscanError
 from common.messages import JointState, RGBDFrame
 from common.runtime import COMMAND_BUDGET, QueryContext, Service, run_service, service_arg_parser, settings_from_args
 from services.calibration.file import HandEyeCalibration, calibration_from_env
 from services.camera.base import LIVE_POSE_SOURCES, POSE_SOURCE_KEY
-from services.camera.registry import BACKENDS, CameraContext, backend_option, camera_from_options
+from services.camera.registry import BACKENDS, CameraContext, camera_from_options
 
 
 def apply_hand_eye(frame: RGBDFrame, hand_eye: HandEyeCalibration | None, path: str | None) -> RGBDFrame:
@@ -51,7 +50,8 @@ class CameraService(Service):
         self.backend = opts.get("backend", "sim")
         # a broken or missing calibration file stops the start: stamping uncorrected poses would be silent
         self.hand_eye, self.hand_eye_path = calibration_from_env(opts.get("hand_eye"))
-        self.camera, _ = camera_from_options(self.backend, opts, CameraContext(render_request=self._render))
+        self.camera, _ = camera_from_options(self.backend, opts.get("backend_options") or {},
+                                             CameraContext(render_request=self._render))
         await self.run_cpu(self.camera.connect)
         self.captures = 0
         self.queryable(keys.camera_capture(self.robot), self.capture, budget=COMMAND_BUDGET)
@@ -76,7 +76,8 @@ class CameraService(Service):
         return frame
 
     async def teardown(self) -> None:
-        await self.run_cpu(self.camera.disconnect)
+        if hasattr(self, "camera"):  # absent when the start failed before the backend was built
+            await self.run_cpu(self.camera.disconnect)
 
     def health_info(self) -> dict[str, object]:
         return {"backend": self.backend, "captures": self.captures, "hand_eye": self.hand_eye_path}
@@ -86,28 +87,21 @@ def main() -> None:
     p = service_arg_parser("objscan camera service")
     p.add_argument("--backend", choices=list(BACKENDS), default="sim",
                    help="camera backend (services/camera/registry.py; default: %(default)s)")
-    p.add_argument("--width", type=int, default=640)
-    p.add_argument("--height", type=int, default=480)
-    p.add_argument("--session", help="replay: the session folder to serve frames from")
-    p.add_argument("--playback", help="realsense: play a .db3 recording instead of a live camera")
-    p.add_argument("--serial", default=os.environ.get("OBJSCAN_CAMERA_SERIAL") or None,
-                   help="realsense: the camera to open when several are attached (default: env OBJSCAN_CAMERA_SERIAL)")
-    p.add_argument("--visual-preset", default=os.environ.get("OBJSCAN_CAMERA_PRESET", "high_accuracy"),
-                   help="realsense: D400 depth preset (default: env OBJSCAN_CAMERA_PRESET or %(default)s; 'none' "
-                        "leaves the camera's)")
-    p.add_argument("--no-exposure-lock", action="store_true",
-                   help="realsense: keep auto exposure / white balance on (default: locked after warm-up)")
+    p.add_argument("--width", type=int, default=None,
+                   help="image width in pixels, for a backend with a width option (sim, realsense; default: its own)")
+    p.add_argument("--height", type=int, default=None,
+                   help="image height in pixels, for a backend with a height option (default: its own)")
     p.add_argument("--hand-eye", default=None, metavar="FILE",
                    help="hand-eye calibration file to correct poses with (default: env OBJSCAN_HAND_EYE)")
-    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE", type=backend_option,
-                   help="a backend's own option (repeatable), e.g. png_folder: --option folder=DIR")
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE", type=option_pair,
+                   help="a backend's own option (repeatable; its keys: docs/extending.md), e.g. replay: "
+                        "--option session=DIR, realsense: --option serial=SN, png_folder: --option folder=DIR")
     args = p.parse_args()
-    options = dict(backend=args.backend, width=args.width, height=args.height, session=args.session,
-                   playback=args.playback, hand_eye=args.hand_eye, serial=args.serial,
-                   no_exposure_lock=args.no_exposure_lock,
-                   visual_preset=None if args.visual_preset == "none" else args.visual_preset)
-    for key, value in args.option:
-        if key in options:
-            p.error(f"--option {key}=...: use the flag --{key.replace('_', '-')}")
-        options[key] = value
-    run_service(lambda: CameraService(settings_from_args(args, **options)))
+    given = dict(args.option)
+    for key in ("width", "height"):
+        if getattr(args, key) is not None:
+            if key in given:
+                p.error(f"--option {key}=... and --{key}: give one")
+            given[key] = getattr(args, key)
+    run_service(lambda: CameraService(settings_from_args(args, backend=args.backend, hand_eye=args.hand_eye,
+                                                         backend_options=given)))

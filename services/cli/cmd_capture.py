@@ -18,12 +18,12 @@ from PIL import Image
 
 from common import keys
 from common.api import CaptureRequest, MoveRequest
+from common.backend_options import option_pair
 from common.client import request_sync
 from common.messages import Request
 from common.session_folder import atomic_write_bytes, atomic_write_json
 from common.zenoh_config import DEFAULT_ROUTER_PORT
 from services.camera.registry import BACKENDS as CAMERA_BACKENDS
-from services.camera.registry import backend_option
 from services.cell import CELLS, hardware_services
 from services.cli.cells import add_network_args, remote_session
 from services.cli.cmd_scan import console, ensure_cell
@@ -46,7 +46,7 @@ def register(sub) -> None:  # noqa: ANN001
     p.add_argument("--width", type=int, default=640, help="image width in pixels (default: %(default)s)")
     p.add_argument("--height", type=int, default=480, help="image height in pixels (default: %(default)s)")
     p.add_argument("--session", help="replay: session folder to read frames from")
-    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE", type=backend_option,
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE", type=option_pair,
                    help="a camera backend's own option, passed to the camera service (repeatable), e.g. "
                         "--backend png_folder --option folder=DIR --option intrinsics=fx,fy,cx,cy")
     p.add_argument("--out", required=True, help="folder to write color.png, depth.png, meta.json")
@@ -83,7 +83,7 @@ def run(args) -> int:  # noqa: ANN001
     out.mkdir(parents=True, exist_ok=True)
     backends = CELLS["sim"] if args.backend == "sim" else {"camera": args.backend}
     services = hardware_services(backends)
-    camera = ["--session", args.session] if args.session else []
+    camera = ["--option", f"session={args.session}"] if args.session else []
     camera += [a for key, value in args.option for a in ("--option", f"{key}={value}")]
     extra: dict[str, list[str]] = {"camera": camera} if camera else {}
     if args.backend == "sim":  # a mesh path: the twin started here may load it (services/sim/object_roots.py)

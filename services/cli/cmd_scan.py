@@ -37,6 +37,7 @@ from common.codec import decode
 from common.errors import ObjscanError
 from common.launcher import ServiceGroup
 from common.messages import Ok, Request
+from common.session_folder import MODEL_FILE, REPORT_FILE
 from common.zenoh_config import DEFAULT_ROUTER_PORT, free_tcp_port
 from services.cell import SERVICE_MODULES, cell_specs, needs_twin
 from services.cli.cells import add_network_args, remote_session, session_name
@@ -159,16 +160,17 @@ def ensure_cell(port: int | None, backend: str | Mapping[str, str], log_dir: Pat
 
 
 def arm_args(args) -> dict[str, list[str]]:  # noqa: ANN001
-    """The arm service's own flags from ``--arm-backend``/``--emulate-bus``/``--robot-config``."""
+    """The arm service's arguments from ``--arm-backend``/``--emulate-bus``/``--robot-config``: the backend and
+    its options (``--option KEY=VALUE``)."""
     out: list[str] = []
     if args.emulate_bus and (args.arm_backend or "dynamixel") != "dynamixel":
         raise BadUsage("--emulate-bus needs --arm-backend dynamixel")
     if args.arm_backend or args.emulate_bus:
         out += ["--backend", args.arm_backend or "dynamixel"]
     if args.emulate_bus:
-        out.append("--emulate-bus")
+        out += ["--option", "emulate_bus=true"]
     if args.robot_config:
-        out += ["--robot-config", str(Path(args.robot_config).resolve())]
+        out += ["--option", f"robot_config={Path(args.robot_config).resolve()}"]
     return {"arm": out} if out else {}
 
 
@@ -239,7 +241,7 @@ def export_after_scan(session_dir: Path, *, quiet: bool) -> int:
     """
     from services.export import export_session
 
-    if not (session_dir / "model.ply").is_file():
+    if not (session_dir / MODEL_FILE).is_file():
         print(one_line(f"objscan scan: --export: {session_dir} holds no model.ply here (a remote or joined "
                        "cell's session): run objscan export on it where it is"), file=sys.stderr)
         return 1
@@ -385,7 +387,7 @@ def _summary_json(final: dict[str, Any], session_dir: Path, seconds: float) -> i
     doc = {"status": status, "state": final.get("state"), "session": str(session_dir),
            "model": final.get("model"), "accuracy": final.get("accuracy"), "views": final.get("views"),
            "views_done": final.get("views_done"), "seconds": round(seconds, 1),
-           "report": str(session_dir / "report.json")}
+           "report": str(session_dir / REPORT_FILE)}
     if final.get("accepted") is not None:
         doc["accepted"], doc["why"] = bool(final["accepted"]), final.get("why") or ""
         warn_unaccepted("scan", final)
@@ -406,7 +408,7 @@ def _summary(final: dict[str, Any], session_dir: Path, seconds: float, resume_ar
         if acc:
             console.print("accuracy against ground truth: " + ", ".join(
                 f"{k} {v:.3f}" for k, v in acc.items()))
-        console.print(f"report: {session_dir / 'report.json'}")
+        console.print(f"report: {session_dir / REPORT_FILE}")
         warn_unaccepted("scan", final)
         return 0
     err = final.get("last_error") or {}

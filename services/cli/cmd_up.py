@@ -54,11 +54,11 @@ def arm_args(args) -> dict[str, list[str]]:  # noqa: ANN001
         require_path(args.robot_config, "robot configuration")
 
         load_robot_config(args.robot_config)
-        out += ["--robot-config", str(Path(args.robot_config).resolve())]
+        out += ["--option", f"robot_config={Path(args.robot_config).resolve()}"]
     if args.emulate_bus:
         if args.backend != "sim":
             raise BadUsage("--emulate-bus runs with the sim cell (--backend sim)")
-        out += ["--backend", "dynamixel", "--emulate-bus"]
+        out += ["--backend", "dynamixel", "--option", "emulate_bus=true"]
     return {"arm": out} if out else {}
 
 

@@ -87,7 +87,8 @@ def cell(tmp_path_factory):
     write_faults(fault_file, {})
     with ServiceGroup(log_dir=tmp_path_factory.mktemp("arm-safety-logs")) as group:
         group.launch([ProcessSpec("services.sim", service="sim"),
-                      ProcessSpec("services.arm", ["--backend", "dynamixel", "--emulate-bus"], service="arm",
+                      ProcessSpec("services.arm", ["--backend", "dynamixel", "--option", "emulate_bus=true"],
+                                  service="arm",
                                   env={FAULT_FILE_ENV: str(fault_file)})],
                      timeout=180)
         c = Cell(group, fault_file)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from common.errors import ServiceStartError
+from common.launcher import ProcessSpec
 from services.arm.drivers.base import ArmDriver
 from services.arm.drivers.dynamixel.config import DynamixelConfig
 from services.arm.drivers.registry import BACKENDS, DriverContext, driver_entry, make_driver
@@ -36,3 +38,36 @@ def test_unknown_backend_and_replay_without_a_session_are_typed_errors():
     assert e.value.code == "unknown_backend" and e.value.detail["known"] == ["dynamixel", "replay", "sim"]
     with pytest.raises(BadCommand):
         make_driver("replay", DriverContext(options={}))
+
+
+def test_arm_options_are_typed_by_the_backend_and_a_wrong_one_names_the_valid_keys():
+    entry = driver_entry("dynamixel")
+    opts = entry.options({"baud": "57600", "emulate_bus": "true", "port": "/dev/ttyUSB3"})  # as --option gives them
+    assert (opts.baud, opts.emulate_bus, opts.port, opts.robot_config) == (57600, True, "/dev/ttyUSB3", None)
+    with pytest.raises(BadCommand) as e:
+        entry.options({"prot": "/dev/ttyUSB0"})
+    assert e.value.code == "unknown_option"
+    assert e.value.detail["valid"] == ["baud", "emulate_bus", "port", "robot_config"]
+    assert "arm backend dynamixel has no option prot" in e.value.message and "emulate_bus" in e.value.message
+    for key, value in (("baud", "fast"), ("emulate_bus", "perhaps")):
+        with pytest.raises(BadCommand) as e:
+            entry.options({key: value})
+        assert e.value.code == "bad_option" and e.value.detail["key"] == key
+    with pytest.raises(BadCommand) as e:
+        make_driver("sim", DriverContext(options={"session": "x"}))  # the twin's driver takes no option
+    assert e.value.code == "unknown_option" and e.value.detail["valid"] == []
+
+
+def test_the_robot_file_comes_from_its_environment_variable_unless_given(tmp_path, monkeypatch):
+    entry = driver_entry("dynamixel")
+    monkeypatch.setenv("OBJSCAN_ROBOT_CONFIG", str(tmp_path / "env.yaml"))
+    assert entry.options({}).robot_config == str(tmp_path / "env.yaml")
+    assert entry.options({"robot_config": "given.yaml"}).robot_config == "given.yaml"
+
+
+def test_the_arm_service_refuses_an_unknown_option_at_start_with_its_valid_keys(service_group, tmp_path):
+    with pytest.raises(ServiceStartError) as exc:
+        service_group.launch([ProcessSpec("services.arm", ["--backend", "replay", "--option", f"folder={tmp_path}"],
+                                          service="arm")], timeout=120)
+    assert exc.value.code == "unknown_option", exc.value
+    assert exc.value.detail["valid"] == ["session"] and "arm backend replay has no option folder" in exc.value.message

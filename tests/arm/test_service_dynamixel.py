@@ -27,7 +27,8 @@ def hil_cell(tmp_path_factory):
 
     with ServiceGroup(log_dir=tmp_path_factory.mktemp("arm-hil-logs")) as group:
         group.launch([ProcessSpec("services.sim", service="sim"),
-                      ProcessSpec("services.arm", ["--backend", "dynamixel", "--emulate-bus"], service="arm")],
+                      ProcessSpec("services.arm", ["--backend", "dynamixel", "--option", "emulate_bus=true"],
+                                  service="arm")],
                      timeout=180)
         yield group
 

@@ -6,10 +6,13 @@ import re
 
 import pytest
 
+from common.backend_options import option_pair
+from common.errors import ServiceStartError
+from common.launcher import ProcessSpec
 from services.arm.drivers.registry import BACKENDS as ARM_BACKENDS
 from services.camera.base import Camera
 from services.camera.errors import CameraConfigError
-from services.camera.registry import BACKENDS, backend_option, camera_entry, make_camera
+from services.camera.registry import BACKENDS, camera_entry, make_camera
 from services.cell import CELLS, cell_specs, hardware_services, needs_twin
 from tests.conftest import REPO
 
@@ -30,9 +33,9 @@ def test_options_build_the_named_backend_through_the_interface(tmp_path):
     rs = camera_entry("realsense").config_from_options({"width": 848, "no_exposure_lock": True, "playback": "x.db3"})
     assert (rs.width, rs.lock_exposure, rs.playback_file) == (848, False, "x.db3")
     assert make_camera(rs).pose_from_arm  # the only backend stamped with the arm's belief
-    assert backend_option("depth-scale=0.002") == ("depth_scale", "0.002")
+    assert option_pair("depth-scale=0.002") == ("depth_scale", "0.002")
     with pytest.raises(ValueError):
-        backend_option("folder")
+        option_pair("folder")
 
 
 def test_cells_name_registry_backends_and_start_them():
@@ -78,3 +81,23 @@ def test_the_service_corrects_live_poses_only(source, corrected):
     assert np.allclose(out.T_base_camera[:3, 3], [0.302, 0.1, 0.4]) == corrected
     assert ("hand_eye" in out.meta) == corrected
     assert apply_hand_eye(frame, None, None) is frame  # no calibration: nothing to do
+
+
+def test_camera_options_are_typed_by_the_backend_and_a_wrong_one_names_the_valid_keys():
+    rs = camera_entry("realsense").options({"width": "848", "no_exposure_lock": "yes", "visual_preset": "none"})
+    assert (rs.width, rs.no_exposure_lock, rs.visual_preset, rs.serial) == (848, True, None, None)
+    with pytest.raises(CameraConfigError) as err:
+        camera_entry("replay").options({"folder": "x"})
+    assert err.value.code == "unknown_option" and err.value.detail["valid"] == ["session"]
+    with pytest.raises(CameraConfigError) as err:
+        camera_entry("png_folder").options({"depth_scale": "lots"})
+    assert err.value.code == "bad_option" and err.value.detail == {
+        "backend": "camera backend png_folder", "key": "depth_scale", "value": "lots", "type": "float"}
+
+
+def test_the_camera_service_refuses_an_option_its_backend_does_not_have(service_group, tmp_path):
+    with pytest.raises(ServiceStartError) as exc:
+        service_group.launch([ProcessSpec("services.camera", ["--backend", "replay", "--option", f"folder={tmp_path}"],
+                                          service="camera")], timeout=120)
+    assert exc.value.code == "unknown_option", exc.value
+    assert exc.value.detail["valid"] == ["session"]

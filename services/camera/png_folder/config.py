@@ -8,8 +8,19 @@ from typing import ClassVar
 
 import numpy as np
 
+from common.backend_options import option
 from services.camera.base import CameraConfig
 from services.camera.errors import CameraConfigError
+
+
+@dataclass(frozen=True)
+class PngFolderOptions:
+    """``--option KEY=VALUE`` on the camera service."""
+
+    folder: str = option("", "the folder of colour/depth PNG frames")
+    intrinsics: str = option("", "fx,fy,cx,cy or a JSON file (default: the folder's intrinsics.json)")
+    depth_scale: float = option(0.001, "metres per depth unit")
+    loop: bool = option(False, "start over at the end of the folder")
 
 
 @dataclass

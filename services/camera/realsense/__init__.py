@@ -6,20 +6,16 @@ Its frames are stamped with the pose the arm believes (``pose_from_arm``).
 
 from __future__ import annotations
 
-from typing import Any
-
 from services.camera.realsense.camera import RealSenseCamera
-from services.camera.realsense.config import RealSenseCameraConfig
+from services.camera.realsense.config import RealSenseCameraConfig, RealSenseOptions
 from services.camera.registry import CameraContext, CameraEntry
 
 
-def _config(options: dict[str, Any]) -> RealSenseCameraConfig:
-    config = RealSenseCameraConfig(width=options.get("width", 640), height=options.get("height", 480),
-                                   serial=options.get("serial"),
-                                   visual_preset=options.get("visual_preset", "high_accuracy"),
-                                   lock_exposure=not options.get("no_exposure_lock", False))
-    if options.get("playback"):
-        config.playback_file = options["playback"]
+def _config(options: RealSenseOptions) -> RealSenseCameraConfig:
+    config = RealSenseCameraConfig(width=options.width, height=options.height, serial=options.serial,
+                                   visual_preset=options.visual_preset, lock_exposure=not options.no_exposure_lock)
+    if options.playback:
+        config.playback_file = options.playback
     return config
 
 
@@ -27,11 +23,7 @@ def _factory(config: RealSenseCameraConfig, ctx: CameraContext) -> RealSenseCame
     return RealSenseCamera(config, device=ctx.device)
 
 
-CAMERA = CameraEntry("realsense", RealSenseCameraConfig, _config, _factory,
-                     description="an Intel RealSense D435 (or a .db3 recording of one)",
-                     options={"width": "image width", "height": "image height",
-                              "serial": "which camera when several are attached",
-                              "visual_preset": "D400 depth preset (None leaves the camera's)",
-                              "no_exposure_lock": "keep auto exposure on", "playback": "a .db3 to play"})
+CAMERA = CameraEntry("realsense", RealSenseCameraConfig, RealSenseOptions, _config, _factory,
+                     description="an Intel RealSense D435 (or a .db3 recording of one)")
 
 __all__ = ["CAMERA", "RealSenseCamera", "RealSenseCameraConfig"]

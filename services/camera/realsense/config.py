@@ -5,9 +5,23 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
+from common.backend_options import option
 from services.camera.base import CameraConfig
 from services.camera.errors import CameraConfigError
 from services.camera.realsense.control import VISUAL_PRESETS
+
+
+@dataclass(frozen=True)
+class RealSenseOptions:
+    """``--option KEY=VALUE`` on the camera service (``--width``/``--height`` set the first two)."""
+
+    width: int = option(640, "image width in pixels")
+    height: int = option(480, "image height in pixels")
+    serial: str | None = option(None, "the camera to open when several are attached", env="OBJSCAN_CAMERA_SERIAL")
+    visual_preset: str | None = option("high_accuracy", "D400 depth preset ('none' leaves the camera's)",
+                                       env="OBJSCAN_CAMERA_PRESET")
+    no_exposure_lock: bool = option(False, "keep auto exposure / white balance on (default: locked after warm-up)")
+    playback: str | None = option(None, "play a .db3 recording instead of a live camera")
 
 
 @dataclass

@@ -6,8 +6,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
+from common.backend_options import option
 from services.camera.base import CameraConfig
 from services.camera.errors import CameraConfigError
+
+
+@dataclass(frozen=True)
+class ReplayCameraOptions:
+    """``--option session=DIR`` on the camera service."""
+
+    session: str = option("", "the session folder to serve frames from")
 
 
 @dataclass

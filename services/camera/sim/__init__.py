@@ -6,19 +6,16 @@ renders in ~60 ms, but a loaded 2-core machine can stall it for seconds.
 
 from __future__ import annotations
 
-from typing import Any
-
 from services.camera.errors import CameraConfigError
 from services.camera.registry import CameraContext, CameraEntry
 from services.camera.sim.camera import RenderRequest, SimCamera
-from services.camera.sim.config import SimCameraConfig
+from services.camera.sim.config import SimCameraConfig, SimCameraOptions
 
 SERVICE_TIMEOUT_S = 60.0
 
 
-def _config(options: dict[str, Any]) -> SimCameraConfig:
-    return SimCameraConfig(width=options.get("width", 640), height=options.get("height", 480),
-                           timeout_s=SERVICE_TIMEOUT_S)
+def _config(options: SimCameraOptions) -> SimCameraConfig:
+    return SimCameraConfig(width=options.width, height=options.height, timeout_s=SERVICE_TIMEOUT_S)
 
 
 def _factory(config: SimCameraConfig, ctx: CameraContext) -> SimCamera:
@@ -27,8 +24,7 @@ def _factory(config: SimCameraConfig, ctx: CameraContext) -> SimCamera:
     return SimCamera(config, render_request=ctx.render_request)
 
 
-CAMERA = CameraEntry("sim", SimCameraConfig, _config, _factory,
-                     description="frames rendered by the digital twin (services/sim)",
-                     options={"width": "image width (640 or 848)", "height": "image height (480)"})
+CAMERA = CameraEntry("sim", SimCameraConfig, SimCameraOptions, _config, _factory,
+                     description="frames rendered by the digital twin (services/sim)")
 
 __all__ = ["CAMERA", "RenderRequest", "SimCamera", "SimCameraConfig"]

@@ -5,9 +5,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
+from common.backend_options import option
 from services.camera.base import CameraConfig
 from services.camera.errors import CameraConfigError
 from services.camera.intrinsics import d435_color_intrinsics
+
+
+@dataclass(frozen=True)
+class SimCameraOptions:
+    """``--option KEY=VALUE`` on the camera service (``--width``/``--height`` set the same two)."""
+
+    width: int = option(640, "image width in pixels (640 or 848)")
+    height: int = option(480, "image height in pixels (480)")
 
 
 @dataclass

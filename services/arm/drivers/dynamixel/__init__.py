@@ -1,24 +1,27 @@
 """DYNAMIXEL backend (Protocol 2.0 over dynamixel-sdk, X and P series), on a real or an emulated bus.
 
-Options: ``robot_config`` (YAML, default: PAPRAS), ``port``/``baud`` (override the file's), and
-``emulate_bus``: run the real driver against an emulated P-series bus whose servo positions drive the
-digital twin (hardware in the loop, ``hil.py``).
+Options (``--option KEY=VALUE`` on the arm service, ``DynamixelOptions``): ``robot_config`` (YAML, default:
+PAPRAS), ``port``/``baud`` (override the file's), and ``emulate_bus``: run the real driver against an emulated
+P-series bus whose servo positions drive the digital twin (hardware in the loop, ``hil.py``).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from services.arm.drivers.dynamixel.config import DynamixelConfig, GripperServoConfig, JointServoConfig
+from services.arm.drivers.dynamixel.config import (
+    DynamixelConfig,
+    DynamixelOptions,
+    GripperServoConfig,
+    JointServoConfig,
+)
 from services.arm.drivers.registry import DriverContext, DriverEntry
 
 
-def _config(options: dict[str, Any]) -> DynamixelConfig:
+def _config(options: DynamixelOptions) -> DynamixelConfig:
     from services.arm.drivers.dynamixel.robot_config import load_robot_config
 
-    baud = options.get("baud")
-    return load_robot_config(options.get("robot_config"), port=options.get("port"),
-                             baudrate=int(baud) if baud is not None else None)
+    return load_robot_config(options.robot_config, port=options.port, baudrate=options.baud)
 
 
 def _factory(config: DynamixelConfig, ctx: DriverContext):  # noqa: ANN202 - a DynamixelArmDriver
@@ -40,7 +43,8 @@ def __getattr__(name: str) -> Any:  # the driver imports dynamixel-sdk: only whe
     raise AttributeError(name)
 
 
-DRIVER = DriverEntry("dynamixel", DynamixelConfig, _config, _factory, realtime=True,
+DRIVER = DriverEntry("dynamixel", DynamixelConfig, DynamixelOptions, _config, _factory, realtime=True,
                      description="DYNAMIXEL X/P servos over a U2D2 (or the emulated bus)")
 
-__all__ = ["DRIVER", "DynamixelArmDriver", "DynamixelConfig", "GripperServoConfig", "JointServoConfig"]
+__all__ = ["DRIVER", "DynamixelArmDriver", "DynamixelConfig", "DynamixelOptions", "GripperServoConfig",
+           "JointServoConfig"]

@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass, field
 from functools import lru_cache
 
+from common.backend_options import option
 from services.arm.drivers.dynamixel.robot_file import DEFAULT_ROBOT_CONFIG, read_robot_file
 from services.arm.drivers.dynamixel.servo_config import (
     BAUD_RATES,
@@ -21,6 +22,17 @@ from services.arm.drivers.dynamixel.servo_config import (
     JointServoConfig,
     _fail,
 )
+
+
+@dataclass(frozen=True)
+class DynamixelOptions:
+    """``--option KEY=VALUE`` on the arm service: which robot file, which bus, real or emulated."""
+
+    robot_config: str | None = option(None, "robot configuration YAML (default: the PAPRAS one shipped in "
+                                            "services/arm/robot/papras_dynamixel.yaml)", env="OBJSCAN_ROBOT_CONFIG")
+    port: str | None = option(None, "serial port of the U2D2 (default: the robot configuration's)")
+    baud: int | None = option(None, "bus baud rate (default: the robot configuration's)")
+    emulate_bus: bool = option(False, "an emulated bus of the configured servos whose positions drive the twin")
 
 
 @lru_cache(maxsize=1)

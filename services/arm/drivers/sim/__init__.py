@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 from services.arm.drivers.registry import DriverContext, DriverEntry
-from services.arm.drivers.sim.config import SimDriverConfig
+from services.arm.drivers.sim.config import SimDriverConfig, SimDriverOptions
 from services.arm.drivers.sim.driver import SimArmDriver
 
 
@@ -15,11 +13,11 @@ def _factory(config: SimDriverConfig, ctx: DriverContext) -> SimArmDriver:
     return TwinLinkedDriver(ctx.session, ctx.robot, ctx.kinematics, config)
 
 
-def _config(options: dict[str, Any]) -> SimDriverConfig:
+def _config(options: SimDriverOptions) -> SimDriverConfig:
     return SimDriverConfig()
 
 
-DRIVER = DriverEntry("sim", SimDriverConfig, _config, _factory, realtime=False,
+DRIVER = DriverEntry("sim", SimDriverConfig, SimDriverOptions, _config, _factory, realtime=False,
                      description="the digital twin over Zenoh (services/sim)")
 
 __all__ = ["DRIVER", "SimArmDriver", "SimDriverConfig"]

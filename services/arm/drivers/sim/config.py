@@ -7,6 +7,11 @@ from dataclasses import dataclass
 from services.arm.drivers.base import HOME_Q
 
 
+@dataclass(frozen=True)
+class SimDriverOptions:
+    """The sim backend takes no ``--option``: the twin it drives is found over Zenoh."""
+
+
 @dataclass
 class SimDriverConfig:
     """Where the twin's arm starts. ``initial_q`` is a camera-up home pose clear of the table."""
