@@ -71,3 +71,22 @@ def test_the_arm_service_refuses_an_unknown_option_at_start_with_its_valid_keys(
                                           service="arm")], timeout=120)
     assert exc.value.code == "unknown_option", exc.value
     assert exc.value.detail["valid"] == ["session"] and "arm backend replay has no option folder" in exc.value.message
+
+
+@pytest.mark.parametrize("command", ["scan", "up"])
+def test_the_cli_hands_the_arm_service_options_its_registry_accepts(command):
+    from argparse import Namespace
+
+    from common.backend_options import option_pair
+    from services.arm.drivers.dynamixel.robot_file import DEFAULT_ROBOT_CONFIG
+
+    if command == "scan":
+        from services.cli.cmd_scan import arm_args
+    else:
+        from services.cli.cmd_up import arm_args
+    args = Namespace(emulate_bus=True, arm_backend=None, backend="sim", robot_config=str(DEFAULT_ROBOT_CONFIG))
+    pairs = list(zip(*[iter(arm_args(args)["arm"])] * 2, strict=True))  # (flag, value): every flag takes one
+    assert {flag for flag, _ in pairs} == {"--backend", "--option"}
+    assert [value for flag, value in pairs if flag == "--backend"] == ["dynamixel"]
+    opts = driver_entry("dynamixel").options(dict(option_pair(v) for flag, v in pairs if flag == "--option"))
+    assert opts.emulate_bus and opts.robot_config == str(DEFAULT_ROBOT_CONFIG.resolve())

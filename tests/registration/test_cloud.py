@@ -12,6 +12,7 @@ from common.geometry import make_transform, rotation_about_axis, transform_point
 from common.messages import Intrinsics, PointCloud, RGBDFrame
 from services.registration.cloud import (
     CloudError,
+    chromaticity,
     depth_edge_mask,
     downsample,
     frame_points,
@@ -128,3 +129,13 @@ def test_downsample_estimates_normals_toward_the_viewpoint():
         np.testing.assert_allclose(np.asarray(out.normals)[:, 2], sign, atol=1e-6)
     with pytest.raises(CloudError):
         downsample(pcd, 0.0)
+
+
+def test_chromaticity_ignores_brightness_and_keeps_near_black_neutral():
+    c = chromaticity(np.array([[200, 100, 50], [100, 50, 25], [0, 0, 2], [2, 0, 0], [0, 0, 0]], np.uint8))
+    np.testing.assert_allclose(c.sum(axis=1), 1.0)
+    assert np.abs(c[0] - c[1]).sum() < 0.01  # the same colour in shadow (half as bright)
+    assert np.abs(c[2] - c[3]).sum() == pytest.approx(0.8)  # two nearly black pixels: not opposite colours
+    np.testing.assert_allclose(c[4], 1.0 / 3.0)  # black is grey
+    # an averaged Open3D colour (0..1, times 255) reads as the same 8-bit colour
+    np.testing.assert_allclose(chromaticity(255.0 * np.array([[200, 100, 50]]) / 255.0), c[:1])
