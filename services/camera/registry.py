@@ -39,8 +39,8 @@ class CameraContext:
 
 @dataclass(frozen=True)
 class CameraEntry:
-    """One backend: ``config_from_options(options) -> config`` (an instance of ``config_class``, from the
-    service's command-line/environment options), ``factory(config, context) -> Camera`` (not connected)."""
+    """One backend: its options dataclass (``options_class``), ``build_config(options) -> config`` (an
+    instance of ``config_class``), ``factory(config, context) -> Camera`` (not connected)."""
 
     name: str
     config_class: type[CameraConfig]
