@@ -44,14 +44,11 @@ def register(sub) -> None:  # noqa: ANN001
 def ground_truth_points(gt: str, session: Path, n: int = 100_000) -> tuple[np.ndarray, bool]:
     """GT surface samples, posed in base of view 0 when the session recorded the true pose."""
     from services.sim.catalogue import load_object
+    from services.sim.ground_truth import posed, recorded_pose
 
     pts = load_object(gt).gt_points(n)
-    meta_path = session / "view_00" / "scan_0" / "meta.json"
-    T = json.loads(meta_path.read_text()).get("T_base_object_true") if meta_path.is_file() else None
-    if T is None:
-        return pts, False
-    T = np.asarray(T, float)
-    return pts @ T[:3, :3].T + T[:3, 3], True
+    T = recorded_pose(session)
+    return (pts, False) if T is None else (posed(pts, T), True)
 
 
 def run(args) -> int:  # noqa: ANN001

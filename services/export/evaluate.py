@@ -31,6 +31,7 @@ def true_surface(model: SessionModel, n: int = GT_POINTS) -> tuple[np.ndarray, f
     import trimesh
 
     from services.sim.catalogue import load_object
+    from services.sim.ground_truth import posed_surface
 
     T = model.ground_truth_pose()
     name = model.data.get("object")
@@ -40,7 +41,7 @@ def true_surface(model: SessionModel, n: int = GT_POINTS) -> tuple[np.ndarray, f
         obj = load_object(str(name))
     except ObjscanError:
         return None
-    pts = obj.gt_points(n) @ T[:3, :3].T + T[:3, 3]
+    pts = posed_surface(obj, T, n)
     volume = abs(float(trimesh.Trimesh(obj.vertices, obj.triangles, process=False).volume))
     return pts, volume
 

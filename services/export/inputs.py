@@ -60,13 +60,10 @@ class SessionModel:
         return out
 
     def ground_truth_pose(self) -> np.ndarray | None:
-        """The true object pose in ``base`` at view 0 (simulated sessions only; evaluation only)."""
-        try:
-            meta = json.loads((view_dir(self.path, 0) / "scan_0" / "meta.json").read_text())
-        except (OSError, json.JSONDecodeError):
-            return None
-        T = meta.get("T_base_object_true")
-        return None if T is None else np.asarray(T, dtype=np.float64).reshape(4, 4)
+        """The true object pose in ``base`` at view 0 (twin sessions only), for the figures against the truth."""
+        from services.sim.ground_truth import recorded_pose
+
+        return recorded_pose(self.path)
 
 
 def load_session_model(session: str | Path) -> SessionModel:

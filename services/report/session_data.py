@@ -140,13 +140,11 @@ def ground_truth_points(session: SessionData, n: int = 60000) -> np.ndarray | No
         return None
     from services.sim.catalogue import load_object
     from services.sim.errors import SimInputError, SimObjectError
-    from services.sim.ground_truth import true_object_points
+    from services.sim.ground_truth import posed_surface, true_object_points
 
     try:
         if frame.meta.get("object_model"):
             return np.asarray(true_object_points(frame, n=n))
-        T = np.asarray(frame.meta["T_base_object_true"], dtype=np.float64).reshape(4, 4)
-        pts = load_object(session.object_name).gt_points(n)
-        return pts @ T[:3, :3].T + T[:3, 3]
+        return posed_surface(load_object(session.object_name), frame.meta["T_base_object_true"], n)
     except (SimInputError, SimObjectError, OSError, KeyError, ValueError):
         return None

@@ -14,7 +14,7 @@ from common.geometry import yaw_deg_about
 from common.messages import d435_intrinsics
 from common.session_folder import read_scan, read_session
 from services.sim.catalogue import load_object
-from services.sim.ground_truth import true_object_points
+from services.sim.ground_truth import posed_surface, recorded_pose, true_object_points
 from services.sim.render import LABEL_OBJECT
 from services.sim.scenario import ScanPoses, camera_look_at, simulated_views, write_session
 from tests.sim.meshes import write_textured_box_obj
@@ -128,6 +128,11 @@ def test_write_session(tmp_path, cube):
     np.testing.assert_array_equal(back.depth, views[1][0].depth)
     np.testing.assert_allclose(back.T_base_camera_true, views[1][0].T_base_camera_true)
     np.testing.assert_allclose(true_object_points(back, 500), true_object_points(views[1][0], 500))
+    # the pose view 0 recorded places the object's true surface where the model's frame has it
+    T0 = recorded_pose(path)
+    np.testing.assert_allclose(T0, views[0][0].meta["T_base_object_true"])
+    np.testing.assert_allclose(posed_surface(load_object(cube), T0, 500), true_object_points(views[0][0], 500))
+    assert recorded_pose(tmp_path / "not-a-session") is None
 
 
 @pytest.mark.slow
