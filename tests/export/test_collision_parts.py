@@ -61,7 +61,7 @@ def test_parts_of_a_can_with_a_recessed_lid_stay_near_the_surface(tmp_path, monk
     mesh = lidded_can(32)
     t0 = time.process_time()
     parts = collision_parts(mesh)
-    assert parts.method == "coacd" and parts.coacd == "ok" and len(parts.parts) >= 2
+    assert parts.method == "coacd" and parts.coacd == "0.050:ok" and len(parts.parts) >= 2
     # the hull alone spans the lid's pocket: the parts must do much better, within the ~2 mm aim
     hull_max, _ = deviation_figures([np.asarray(mesh.vertices)], mesh)
     assert hull_max > 0.9 * LID_RECESS
@@ -83,7 +83,7 @@ def test_coacd_past_its_cpu_budget_keeps_the_hull(monkeypatch):
     monkeypatch.setattr(collision, "COACD_THRESHOLDS", (0.005, 0.005))
     t0 = time.perf_counter()
     parts = collision_parts(mesh, cpu_budget_s=1.0)
-    assert parts.coacd == "over_budget" and parts.method == "hull" and len(parts.parts) == 1
+    assert parts.coacd == "0.005:over_budget" and parts.method == "hull" and len(parts.parts) == 1
     assert parts.max_deviation_m > 0.9 * LID_RECESS  # the hull's own deviation is reported, not hidden
     assert time.perf_counter() - t0 < 60.0
 
