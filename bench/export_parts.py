@@ -31,6 +31,8 @@ SETTINGS: dict[str, dict[str, Any]] = {
     "uncapped_0.050": {"threshold": 0.05, "max_convex_hull": -1},
     "uncapped_0.035": {"threshold": 0.035, "max_convex_hull": -1},
     "uncapped_0.025": {"threshold": 0.025, "max_convex_hull": -1},
+    "uncapped_0.050_nodes_5": {"threshold": 0.05, "max_convex_hull": -1, "mcts_nodes": 5},
+    "uncapped_0.025_nodes_5": {"threshold": 0.025, "max_convex_hull": -1, "mcts_nodes": 5},
 }
 
 
