@@ -4,7 +4,9 @@
 
 For each session (a finished simulated acquisition) and each surface method (``poisson``, ``tsdf``) it runs
 ``export_session`` and keeps the issue's figures: ``watertight``, ``mesh_chamfer_mm``, ``points_chamfer_mm``
-(the point model's, same evaluator), ``volume_ratio`` (mesh volume over the true mesh's), ``parts``,
+(the point model's, same evaluator), ``volume_ratio`` (mesh volume over the true mesh's) and its split
+(``volume_split``: the unseen recess the bottom cap closes, the side wall's bias), ``parts`` and how far
+they stand out (``parts_deviation_mm``),
 ``seconds`` (the export, without the ground-truth evaluation), and the pass/fail of each target.
 """
 
@@ -22,9 +24,9 @@ from common.errors import ObjscanError
 from common.session_folder import atomic_write_json
 from services.export import METHODS, export_session
 
-KEYS = ("watertight", "is_volume", "mesh_chamfer_mm", "points_chamfer_mm", "volume_ratio", "parts",
-        "parts_max_deviation_mm", "seconds", "cpu_seconds", "cpu_wait_seconds", "triangles", "textured", "timings_s",
-        "evaluation_seconds")
+KEYS = ("watertight", "is_volume", "mesh_chamfer_mm", "points_chamfer_mm", "volume_ratio", "volume_split", "parts",
+        "parts_max_deviation_mm", "parts_deviation_mm", "parts_coacd", "seconds", "cpu_seconds", "cpu_wait_seconds",
+        "triangles", "textured", "timings_s", "evaluation_seconds")
 
 
 def targets(r: dict[str, Any]) -> dict[str, bool]:
@@ -60,7 +62,8 @@ def run(sessions: list[Path], out: Path, methods: tuple[str, ...], save=None) ->
             row["targets"] = targets(row)
             rows.append(row)
             print(json.dumps({k: row[k] for k in ("object", "method", "mesh_chamfer_mm", "points_chamfer_mm",
-                                                  "volume_ratio", "parts", "seconds", "cpu_seconds", "watertight")}),
+                                                  "volume_ratio", "parts", "parts_deviation_mm", "seconds",
+                                                  "cpu_seconds", "watertight")}),
                   flush=True)
             doc["stamp"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
             if save:

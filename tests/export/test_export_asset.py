@@ -89,6 +89,9 @@ def test_urdf_loads_with_an_independent_parser_and_inertia_is_the_box(exported):
     true = true_box_inertia(DENSITY * np.prod(SIZE))
     assert np.allclose(np.diag(I), np.diag(true), rtol=0.10)
     assert len(link.collisions) == result["parts"] >= 1
+    # a box is its own hull: one part, flush with the surface, no decomposition run
+    assert result["parts_coacd"] == "not_needed" and result["parts"] == 1
+    assert 0.0 <= result["parts_deviation_mm"]["p95"] <= result["parts_deviation_mm"]["max"] < 2.0
     for c in link.collisions:
         assert (out / c.geometry.mesh.filename).is_file()
 
