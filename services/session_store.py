@@ -203,7 +203,7 @@ class SessionStore:
         table = Plane(normal=np.asarray(t["normal"], float), offset=float(t["offset"]),
                       center=np.asarray(t["center"], float))
         return ViewResult(view=int(meta["view"]), cloud=cloud, table=table, center=np.asarray(meta["center"], float),
-                          height=float(meta["height"]), scan_poses=np.asarray(meta["scan_poses"], float),
+                          height=float(meta["height"]), scan_poses=np.asarray(meta["scan_poses"], float).reshape(-1, 4, 4),
                           figures=meta.get("figures", {}))
 
     def save_json(self, relative: str, data: Any) -> None:

@@ -3,8 +3,10 @@
 - ``objscan/registration/static``: the scans of one view → the isolated object (``ViewResult``).
 - ``objscan/registration/dynamic``: registered views → the model; its pair jobs are spread over every
   live registration worker (found by liveliness), a job whose worker dies is retried on another.
-- ``objscan/registration/pair``: one pair job (the incremental model's, during an acquisition), run by a
-  live worker; retried on another when that worker dies.
+- ``objscan/registration/edge``: the views of one edge of the incremental model (during an acquisition)
+  → its pair results: the jobs are built, fingerprinted and run on this side, spread over the live workers.
+- ``objscan/registration/pair``: one pair job, run by a live worker; retried on another when that worker
+  dies.
 - ``objscan/registration/worker/{instance}/pair``: one pair job, answered by this worker.
 
 Every instance is a worker; any one of them can coordinate a dynamic request. The algorithms live in
@@ -19,7 +21,11 @@ from common.codec import Message
 from common.errors import InvalidRequest
 from common.runtime import QueryContext, Service, run_service, service_arg_parser, settings_from_args
 from services.registration.api import pair_job_from_message, pair_result_message, register_scans, view_result
-from services.registration.dynamic_face import build_model_distributed, register_pair_distributed
+from services.registration.dynamic_face import (
+    build_model_distributed,
+    register_edge_distributed,
+    register_pair_distributed,
+)
 
 # registers PairJobMessage/PairResultMessage with the codec: a pair job is decoded before its handler runs
 from services.registration.pair_pool import PairPool
@@ -29,7 +35,7 @@ class RegistrationService(Service):
     name = "registration"
 
     async def setup(self) -> None:
-        self.jobs_done = {"static": 0, "pair": 0, "dynamic": 0}
+        self.jobs_done = {"static": 0, "pair": 0, "edge": 0, "dynamic": 0}
         self.coordinating = 0
         self.pairs_running = 0
         # pair jobs run in processes (pair_pool.py): several at once per instance, none sharing the static
@@ -41,6 +47,7 @@ class RegistrationService(Service):
         self.queryable(keys.registration_worker_pair(self.instance), self.pair)
         self.queryable(keys.REGISTRATION_DYNAMIC, self.dynamic)
         self.queryable(keys.REGISTRATION_PAIR, self.pair_any)
+        self.queryable(keys.REGISTRATION_EDGE, self.edge)
 
     async def static(self, msg: Message | None, ctx: QueryContext) -> ViewResult:
         if not isinstance(msg, StaticRequest):
@@ -66,6 +73,15 @@ class RegistrationService(Service):
             return await register_pair_distributed(self, msg)
         finally:
             self.coordinating -= 1
+
+    async def edge(self, msg: Message | None, ctx: QueryContext) -> Message:
+        self.coordinating += 1
+        try:
+            reply = await register_edge_distributed(self, msg)
+        finally:
+            self.coordinating -= 1
+        self.jobs_done["edge"] += 1
+        return reply
 
     async def dynamic(self, msg: Message | None, ctx: QueryContext) -> Message:
         self.coordinating += 1
