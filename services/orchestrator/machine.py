@@ -27,7 +27,6 @@ from __future__ import annotations
 import asyncio
 import errno
 import logging
-import os
 import shutil
 import time
 from collections.abc import Callable
@@ -40,10 +39,9 @@ from common.api import GraspPlanReply, ViewResult
 from common.errors import ObjscanError, RemoteError
 from common.log import event
 from common.messages import Grasp
-from common.pose_accuracy import PoseAccuracy
 from common.session_folder import view_dir
-from services.arm.drivers.dynamixel.robot_file import robot_pose_accuracy
 from services.orchestrator.cell import Cell
+from services.orchestrator.cell_setup import prepare_cell
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.ground_truth import evaluate_against_twin, journal_accuracy
 from services.orchestrator.incremental import IncrementalModel
@@ -56,7 +54,6 @@ from services.orchestrator.planning import (
     look_pose,
     object_box,
     radial_offset_deg,
-    scan_pose_candidates,
     turn_sequences,
 )
 from services.orchestrator.recovery import grasp_order, lies_down, plan_mode
@@ -69,6 +66,7 @@ from services.orchestrator.regrasp import (
     yaw_tied,
 )
 from services.orchestrator.reposition import NO_TURN, drift, favoured_spots, reposition_shifts, without_turn
+from services.orchestrator.scan_reach import first_reachable_scan_set, scannable_spot
 from services.orchestrator.session_report import acquisition_report, model_lateness_s, write_report
 from services.orchestrator.states import TERMINAL, TRANSITIONS, State
 from services.orchestrator.topple import topple_reason
@@ -178,7 +176,7 @@ class Acquisition:
                 await self.cell.reset_estop()
             if self.j.turn_intent:  # before anything opens the gripper: it may hold the object
                 await self._recover_turn()
-            await self._prepare_cell()
+            await prepare_cell(self.cell, self.config, self.j, self.decide)
             while self.state not in TERMINAL:
                 if self.stop_requested.is_set():
                     raise asyncio.CancelledError
@@ -244,40 +242,6 @@ class Acquisition:
         self.decide("failed", code=code, message=message)
         await self._park()
 
-    async def _prepare_cell(self) -> None:
-        """First start: reset the twin to this session's object/profile/seed (sim cells only)."""
-        if self.j.simulated is None:
-            try:
-                x, y = self.config.workspace_center
-                form = {k: v for k, v in (("scale", self.config.object_scale),
-                                          ("up_axis", self.config.object_up_axis)) if v is not None}
-                state = await self.cell.sim("reset", object=self.config.object, profile=self.config.profile,
-                                            seed=self.config.seed, x=float(x), y=float(y),
-                                            physics=self.config.physics, **form)
-                self.j.simulated = True
-                self._state_pose_accuracy(state.get("pose_accuracy"))
-                turn_sigma = state.get("turn_accuracy_deg")
-                if isinstance(turn_sigma, (int, float)) and turn_sigma > 0:  # session.json keeps it (reconstruct)
-                    self.config.turn_accuracy_deg = float(turn_sigma)
-                    self.j.config["turn_accuracy_deg"] = self.config.turn_accuracy_deg
-                if self.config.force_first_slip:
-                    await self.cell.sim("force_slip")
-            except ObjscanError as exc:
-                if exc.code not in ("unavailable", "timeout"):
-                    raise
-                self.j.simulated = False
-                self._state_pose_accuracy(robot_pose_accuracy(os.environ.get("OBJSCAN_ROBOT_CONFIG")).to_dict())
-            self.decide("cell ready", simulated=self.j.simulated, pose_accuracy=self.config.pose_accuracy)
-        await self.cell.gripper(0.1, self.config.turn.gripper_force)
-
-    def _state_pose_accuracy(self, accuracy: dict | None) -> None:
-        """Record the arm's camera pose accuracy the cell states (unless the run's config gave one): every
-        static registration gets it, and session.json keeps it for ``reconstruct``."""
-        if self.config.pose_accuracy or not accuracy:
-            return
-        self.config.pose_accuracy = PoseAccuracy.from_dict(accuracy).to_dict()
-        self.j.config["pose_accuracy"] = self.config.pose_accuracy
-
     async def _park(self) -> None:
         """Arm home with the gripper open: the safe state after a failure."""
         for step in (lambda: self.cell.gripper(0.1), lambda: self.cell.clear_object_box(),
@@ -332,7 +296,7 @@ class Acquisition:
                 await self.cell.move("home", speed=0.6)
             except RemoteError as exc:
                 self.decide("could not go home before choosing scan poses", code=exc.code)
-        candidate, reasons = await self._first_reachable_scan_set(center, height)
+        candidate, reasons = await first_reachable_scan_set(self.cell, self.config.scan, center, height)
         if candidate is not None:
             self.j.scan_sets[key] = [T.tolist() for T in candidate]
             return candidate
@@ -340,41 +304,9 @@ class Acquisition:
                                 f"limit: {name_scan_pose_limit(reasons)}",
                                 detail={"center": center.tolist(), "reasons": reasons[:6], "limit": "reach"})
 
-    async def _first_reachable_scan_set(self, center: np.ndarray, height: float, start_q: np.ndarray | None = None
-                                        ) -> tuple[list[np.ndarray] | None, list[str]]:
-        """The first candidate set of scan poses around an object at ``center`` whose every pose the arm
-        reaches (dry runs, from ``start_q`` when given, else from the current posture), and the refusals."""
-        reasons: list[str] = []
-        for candidate in scan_pose_candidates(center, height, self.config.scan):
-            try:
-                for T in candidate:
-                    await self.cell.move("pose", target=T, q=start_q, frame="camera", dry_run=True)
-            except RemoteError as exc:
-                if exc.code in ("estop_latched", "busy"):
-                    raise
-                reasons.append(exc.code)
-                continue
-            return candidate, reasons
-        return None, reasons
-
     async def _scannable_spot(self, spot: np.ndarray, height: float, cache: dict[tuple, bool]) -> bool:
-        """Whether the object set down at ``spot`` can be scanned there: a relocated set-down that leaves no
-        reachable set of scan poses would end the acquisition at the next view, so such a spot is never
-        chosen. Checked from the home posture, where the next view's scan poses are planned from."""
-        key = tuple(np.round(np.asarray(spot, float)[:2], 3))
-        if key not in cache:
-            try:
-                start_q: np.ndarray | None = np.asarray((await self.cell.move("home", dry_run=True)).q, float)
-            except RemoteError as exc:
-                if exc.code in ("estop_latched", "busy"):
-                    raise
-                start_q = None  # the way home is blocked from here: plan from the current posture instead
-            candidate, reasons = await self._first_reachable_scan_set(np.asarray(spot, float), height, start_q)
-            cache[key] = candidate is not None
-            if candidate is None:
-                self.decide("relocated spot leaves no reachable scan poses", spot=list(key),
-                            limit=name_scan_pose_limit(reasons))
-        return cache[key]
+        """Whether the object set down at ``spot`` can be scanned there (``scan_reach.scannable_spot``)."""
+        return await scannable_spot(self.cell, self.config.scan, spot, height, cache, self.decide)
 
     async def scan(self) -> State:
         k = self.view

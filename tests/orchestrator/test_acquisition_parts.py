@@ -149,3 +149,74 @@ def test_a_library_insert_that_fails_says_why_and_never_raises(tmp_path):
     out = insert_session_model(tmp_path / "lib", not_a_session)
     assert not out.ok and out.entry is None and out.error
     assert not asyncio.run(insert_session_model_async(tmp_path / "lib", not_a_session)).ok
+
+
+# ------------------------------------------------------------------------------------------ cell set-up
+class _Cell:
+    """A cell whose twin and arm answer as scripted; every call is recorded."""
+
+    def __init__(self, twin: dict | None = None, refuse_first: int = 0):
+        self.twin, self.refuse_first, self.calls = twin, refuse_first, []
+
+    async def sim(self, op, **kw):  # noqa: ANN001, ANN003, ANN201
+        self.calls.append(("sim", op))
+        if self.twin is None:
+            from common.errors import RemoteError
+
+            raise RemoteError("no twin", code="unavailable")
+        return self.twin
+
+    async def gripper(self, opening, force=None):  # noqa: ANN001, ANN201
+        self.calls.append(("gripper", opening))
+
+    async def move(self, kind, **kw):  # noqa: ANN001, ANN003, ANN201
+        from types import SimpleNamespace
+
+        from common.errors import RemoteError
+
+        self.calls.append(("move", kind))
+        if kind == "pose" and self.refuse_first > 0:
+            self.refuse_first -= 1
+            raise RemoteError("out of reach", code="unreachable")
+        return SimpleNamespace(q=np.zeros(6))
+
+
+def test_a_twin_states_its_accuracy_and_a_real_cell_the_robot_files(monkeypatch):
+    from services.orchestrator.cell_setup import prepare_cell
+    from services.orchestrator.config import AcquisitionConfig
+
+    said: list = []
+    config, j = AcquisitionConfig(views=3), Journal(config={})
+    twin = {"pose_accuracy": {"position_sigma_mm": 2.0, "orientation_sigma_deg": 0.5}, "turn_accuracy_deg": 1.5}
+    cell = _Cell(twin)
+    asyncio.run(prepare_cell(cell, config, j, lambda what, **kw: said.append(what)))
+    assert j.simulated is True and config.turn_accuracy_deg == 1.5 and j.config["turn_accuracy_deg"] == 1.5
+    assert j.config["pose_accuracy"] == config.pose_accuracy and config.pose_accuracy
+    assert cell.calls[0] == ("sim", "reset") and cell.calls[-1][0] == "gripper" and said == ["cell ready"]
+
+    real, j2, config2 = _Cell(None), Journal(config={}), AcquisitionConfig(views=3)
+    asyncio.run(prepare_cell(real, config2, j2, lambda what, **kw: None))
+    assert j2.simulated is False and config2.pose_accuracy  # the robot file's (or the conservative default)
+    asyncio.run(prepare_cell(real, config2, j2, lambda what, **kw: None))  # a resume: the twin is not reset
+    assert [c for c in real.calls if c[0] == "sim"] == [("sim", "reset")]
+
+
+# ------------------------------------------------------------------------------------------ scan reach
+def test_the_first_reachable_scan_set_skips_refused_ones_and_a_spot_is_checked_once():
+    from services.orchestrator.config import AcquisitionConfig
+    from services.orchestrator.scan_reach import first_reachable_scan_set, scannable_spot
+
+    scan = AcquisitionConfig(views=3).scan
+    cell = _Cell(refuse_first=1)
+    poses, reasons = asyncio.run(first_reachable_scan_set(cell, scan, np.array([0.4, 0.0, 0.0]), 0.1))
+    assert poses is not None and reasons == ["unreachable"]
+    cache: dict = {}
+    said: list = []
+    spot = np.array([0.35, 0.05, 0.0])
+    assert asyncio.run(scannable_spot(cell, scan, spot, 0.1, cache, lambda what, **kw: said.append(what)))
+    moves = len(cell.calls)
+    assert asyncio.run(scannable_spot(cell, scan, spot + 1e-5, 0.1, cache, lambda what, **kw: None))
+    assert len(cell.calls) == moves and said == []  # the same spot (to the millimetre): not asked again
+    never = _Cell(refuse_first=10 ** 6)
+    assert not asyncio.run(scannable_spot(never, scan, spot, 0.1, {}, lambda what, **kw: said.append(what)))
+    assert said == ["relocated spot leaves no reachable scan poses"]
