@@ -15,6 +15,8 @@ Every instance is a worker; any one of them can coordinate a dynamic request. Th
 
 from __future__ import annotations
 
+from collections.abc import Awaitable, Callable
+
 from common import keys
 from common.api import StaticRequest, ViewResult
 from common.codec import Message
@@ -67,30 +69,27 @@ class RegistrationService(Service):
         self.jobs_done["pair"] += 1
         return pair_result_message(result)
 
-    async def pair_any(self, msg: Message | None, ctx: QueryContext) -> Message:
+    async def _coordinate(self, run: Callable[[RegistrationService, Message | None], Awaitable[Message]],
+                          msg: Message | None, done: str | None = None) -> Message:
+        """Answer ``msg`` by ``run`` (work spread over the live workers); health counts it as coordinating
+        while it runs and, once answered, under ``jobs_done[done]``."""
         self.coordinating += 1
         try:
-            return await register_pair_distributed(self, msg)
+            reply = await run(self, msg)
         finally:
             self.coordinating -= 1
-
-    async def edge(self, msg: Message | None, ctx: QueryContext) -> Message:
-        self.coordinating += 1
-        try:
-            reply = await register_edge_distributed(self, msg)
-        finally:
-            self.coordinating -= 1
-        self.jobs_done["edge"] += 1
+        if done is not None:
+            self.jobs_done[done] += 1
         return reply
 
+    async def pair_any(self, msg: Message | None, ctx: QueryContext) -> Message:
+        return await self._coordinate(register_pair_distributed, msg)
+
+    async def edge(self, msg: Message | None, ctx: QueryContext) -> Message:
+        return await self._coordinate(register_edge_distributed, msg, "edge")
+
     async def dynamic(self, msg: Message | None, ctx: QueryContext) -> Message:
-        self.coordinating += 1
-        try:
-            result = await build_model_distributed(self, msg)
-        finally:
-            self.coordinating -= 1
-        self.jobs_done["dynamic"] += 1
-        return result
+        return await self._coordinate(build_model_distributed, msg, "dynamic")
 
     async def teardown(self) -> None:
         self.pair_pool.close()
