@@ -1,6 +1,6 @@
 """The acquisition state machine: locate → (scan → register → plan grasp → turn) × views → model → done.
 
-States and their allowed transitions are declared in ``TRANSITIONS`` (drawn in docs/orchestrator.md); a
+States and their allowed transitions are declared in ``states.TRANSITIONS`` (drawn in docs/orchestrator.md); a
 transition outside it is a bug and stops the run. Every state's outputs are written to the session folder
 and the journal before the next state starts, so a killed orchestrator resumes at the state it was in
 and re-uses every frame already captured (scans are never captured twice, and never overwritten: a
