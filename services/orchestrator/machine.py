@@ -6,6 +6,12 @@ and the journal before the next state starts, so a killed orchestrator resumes a
 and re-uses every frame already captured (scans are never captured twice, and never overwritten: a
 re-scan first moves the old attempt aside).
 
+This module drives; every other job of an acquisition is a small module it calls: the records of the
+irreversible steps (``turn_journal``), the cell made ready (``cell_setup``), the scan poses the arm reaches
+(``scan_reach``), the arm's motions (``motion``), the pair work sent to registration (``incremental``), the
+ground-truth evaluation (``ground_truth``), ``report.json`` (``session_report``) and the library insert
+(``library_insert``).
+
 Recovery, as a robot on a real table needs it:
 - an unreachable or colliding motion tries the grasp's next angular offset, then the next grasp;
 - a failed grasp (slip, nothing between the pads) opens, backs off, re-scans and re-plans;
