@@ -174,6 +174,40 @@ class DynamicRequest(Message):
 
 
 @dataclass(kw_only=True)
+class EdgeRequest(Message):
+    """``objscan/registration/edge``: the views one edge of the incremental model needs → its pair results.
+
+    The orchestrator sends views; the registration side builds the edge's jobs (``source`` onto ``source -
+    1``) in ``configurations``, fingerprints them, runs those whose fingerprint is not in ``known`` (already
+    stored by the session) and answers an ``EdgeReply``. ``background``: speculative work, run at the
+    workers' lowest CPU priority."""
+
+    source: int
+    views: list[ViewResult] = field(default_factory=list)
+    turns_deg: list[float] = field(default_factory=list)
+    config: dict = field(default_factory=dict)
+    configurations: list[str] = field(default_factory=list)
+    known: list[str] = field(default_factory=list)
+    background: bool = False
+
+    def validate(self) -> None:
+        if self.source < 1:
+            raise WireError("an edge's source view is 1 or later", code="bad_value")
+        if len(self.turns_deg) <= self.source:
+            raise WireError("one commanded turn per view up to the source is required", code="bad_shape")
+
+
+@dataclass(kw_only=True)
+class EdgeReply(Message):
+    """The pair results of an ``EdgeRequest``: one record per job run (``pair_record``: the result with the
+    fingerprint of the job it answers) and that job's configuration, in the same order; empty when the
+    edge's jobs cannot be known yet or every one was ``known``."""
+
+    records: list[dict] = field(default_factory=list)
+    configurations: list[str] = field(default_factory=list)
+
+
+@dataclass(kw_only=True)
 class ModelResult(Message):
     """The model cloud (``base`` of view 0) and its figures: edges, loop closure, configuration chosen."""
 

@@ -51,6 +51,7 @@ def sim(robot: str, op: str) -> str:
 # registration (shared compute)
 REGISTRATION_STATIC = f"{ROOT}/registration/static"
 REGISTRATION_PAIR = f"{ROOT}/registration/pair"
+REGISTRATION_EDGE = f"{ROOT}/registration/edge"
 REGISTRATION_DYNAMIC = f"{ROOT}/registration/dynamic"
 
 

@@ -203,9 +203,9 @@ class SessionStore:
         t = meta["table"]
         table = Plane(normal=np.asarray(t["normal"], float), offset=float(t["offset"]),
                       center=np.asarray(t["center"], float))
+        poses = np.asarray(meta["scan_poses"], float).reshape(-1, 4, 4)  # none: (0, 4, 4), as the wire wants
         return ViewResult(view=int(meta["view"]), cloud=cloud, table=table, center=np.asarray(meta["center"], float),
-                          height=float(meta["height"]), scan_poses=np.asarray(meta["scan_poses"], float),
-                          figures=meta.get("figures", {}))
+                          height=float(meta["height"]), scan_poses=poses, figures=meta.get("figures", {}))
 
     def save_json(self, relative: str, data: Any) -> None:
         atomic_write_json(self.path / relative, data)

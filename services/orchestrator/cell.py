@@ -25,6 +25,8 @@ from common import keys
 from common.api import (
     CaptureRequest,
     DynamicRequest,
+    EdgeReply,
+    EdgeRequest,
     GraspPlanReply,
     GraspRequest,
     GripperRequest,
@@ -183,15 +185,11 @@ class Cell:
                                     timeout=COMPUTE_TIMEOUT_S * 2)
         return _expect(reply, ModelResult)
 
-    async def register_pair(self, job: Message) -> Message:
-        """One pair job (a ``PairJobMessage``) on the registration workers; the reply is its ``PairResultMessage``.
-
-        The message classes live with the registration code (imported by the caller, not here: they pull in
-        open3d)."""
-        reply = await self._request(keys.REGISTRATION_PAIR, job, timeout=COMPUTE_TIMEOUT_S)
-        if type(reply).__name__ != "PairResultMessage":
-            raise RemoteError(f"expected PairResultMessage, got {type(reply).__name__}", code="bad_reply")
-        return reply
+    async def register_edge(self, request: EdgeRequest) -> EdgeReply:
+        """One edge of the incremental model: its views go to registration, which builds, fingerprints and
+        runs the edge's pair jobs on its workers; the reply is their results, ready to store."""
+        reply = await self._request(keys.REGISTRATION_EDGE, request, timeout=COMPUTE_TIMEOUT_S)
+        return _expect(reply, EdgeReply)
 
     # ---------------------------------------------------------------------------- digital twin only
     async def sim(self, op: str, **params: Any) -> dict[str, Any]:

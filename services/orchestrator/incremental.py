@@ -1,31 +1,33 @@
 """The incremental model: pair registrations run during the acquisition, not all at its end.
 
-As soon as view k's static result is saved, the pair job "view k onto view k-1" of the first configuration
-the dynamic stage runs is built and sent to the registration workers (``registration/pair``) as a background
-task: the arm turns the object to view k+1 meanwhile, and the state machine never waits on it. The same
-edge's jobs of every other configuration the automatic choice may run (``no_region_crop``, ``region``,
-``region_crop``) follow as **speculative** jobs: one at a time, in configuration order, and only while no
-foreground work is in flight (a static registration, a first-configuration job), so they use the time the
-arm spends grasping, turning and scanning and never delay the acquisition or the first configuration. At
-the end, the orchestrator's ``registration/dynamic`` request carries the finished results (``reuse_pairs``)
-and the dynamic stage runs only what is left: the last neighbour pair and the loop closure of each
-configuration it runs, the combination, the fusion. Speculative jobs not started when the last view is in
-are dropped (the dynamic stage computes them only if the first configuration is rejected); the one in
-flight is awaited.
+As soon as view k's static result is saved, the views of the edge "view k onto view k-1" go to the
+registration service (``registration/edge``) as a background task: registration builds the edge's pair job in
+the first configuration the dynamic stage runs, fingerprints it, runs it on its workers and answers the
+result. The orchestrator sends views and receives results; it never builds or sees a pair job. The arm turns
+the object to view k+1 meanwhile, and the state machine never waits on it. The same edge's jobs of every other
+configuration the automatic choice may run (``no_region_crop``, ``region``, ``region_crop``) follow as
+**speculative** jobs: one at a time, in configuration order, and only while no foreground work is in flight (a
+static registration, a first-configuration job), so they use the time the arm spends grasping, turning and
+scanning and never delay the acquisition or the first configuration. At the end, the orchestrator's
+``registration/dynamic`` request carries the finished results (``reuse_pairs``) and the dynamic stage runs
+only what is left: the last neighbour pair and the loop closure of each configuration it runs, the
+combination, the fusion. Speculative jobs not started when the last view is in are dropped (the dynamic stage
+computes them only if the first configuration is rejected); the one in flight is awaited.
 
-Why the result is the same as computing every pair at the end: a job depends only on its two views, view
-0 (the stacking frame), the color palette, which the incremental model fits on the first two views
+Why the result is the same as computing every pair at the end: a job depends only on its two views, view 0
+(the stacking frame), the color palette, which the incremental model fits on the first two views
 (``preprocess.palette_views = 2``, sent with the final request too), and, for a region configuration, the
 regions of its two views (each segmented on its own, fixed seed) and their GOOD pairing
 (``model.early_pair_jobs``). Every result is stored with the fingerprint of the job it answers
 (``pair.job_fingerprint``); the dynamic stage reuses a result only for the identical job, so a re-scanned
 view, another configuration or a changed setting is recomputed, never mixed in.
 
-Persistence: each result is written atomically to ``pairs/edge_KK_<fingerprint>.json`` in the session
-folder as soon as it arrives; a resumed orchestrator finds it there and does not send the job again. A
-job whose worker dies is re-run by another worker (``dynamic_face.distributed_map``); a coordinating
-registration instance that dies is re-sent by the ``Cell``. A job that fails is only logged: the dynamic
-stage then computes that pair at the end, as without the incremental model.
+Persistence: each result is written atomically to ``pairs/edge_KK_<fingerprint>.json`` in the session folder
+as soon as it arrives; a resumed orchestrator sends the fingerprints stored for an edge along with its views
+(``known``), and registration does not run those jobs again. A job whose worker dies is re-run by another
+worker (``dynamic_face.distributed_map``); a coordinating registration instance that dies is re-sent by the
+``Cell``. A job that fails is only logged: the dynamic stage then computes that pair at the end, as without
+the incremental model.
 """
 
 from __future__ import annotations
@@ -38,16 +40,9 @@ from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
 
+from common.api import EdgeRequest
 from common.log import event
-from services.registration.api import (
-    EdgeJob,
-    dynamic_configurations,
-    edge_jobs,
-    edge_views_needed,
-    pair_job_message,
-    pair_record,
-    pair_result_from_message,
-)
+from services.registration.api import dynamic_configurations, edge_views_needed
 from services.session_store import SessionStore
 
 log = logging.getLogger("objscan.orchestrator")
@@ -166,19 +161,32 @@ class IncrementalModel:
     def _path(self, source: int, fingerprint: str) -> Path:
         return self.folder / f"edge_{source - 1:02d}_{fingerprint[:16]}.json"
 
-    def _jobs(self, source: int, turns_deg: list[float], names: list[str]) -> list[EdgeJob]:
-        """The edge's jobs as the dynamic stage will build them (registration's ``edge_jobs``) from the views
-        stored so far: CPU, in a thread. Empty when they cannot be known yet."""
-        views = {i: self.store.load_view(i) for i in edge_views_needed(self.config, source)}
-        return edge_jobs(views, turns_deg, self.config, source, names)
+    def _request(self, source: int, turns_deg: list[float], configuration: str, background: bool) -> EdgeRequest:
+        """What registration needs for one configuration's job of edge ``source``: the views it needs (read from
+        the session folder: disk and PLY parsing, so in a thread) and the fingerprints of this edge's results
+        the session already stores (never computed twice, a restart included)."""
+        views = [self.store.load_view(i) for i in edge_views_needed(self.config, source)]
+        known = [rec["fingerprint"] for rec in self._stored(source)]
+        return EdgeRequest(source=source, views=views, turns_deg=list(turns_deg), config=self.config,
+                           configurations=[configuration], known=known, background=background)
+
+    def _stored(self, source: int) -> list[dict]:
+        """The stored results of edge ``source`` (any configuration or generation)."""
+        if not self.folder.is_dir():
+            return []
+        out = []
+        for p in sorted(self.folder.glob(f"edge_{source - 1:02d}_*.json")):
+            rec = self.store.load_json(f"{PAIRS_DIR}/{p.name}")
+            if isinstance(rec, dict) and "fingerprint" in rec:
+                out.append(rec)
+        return out
 
     async def _edge(self, source: int, generation: int, turns_deg: list[float]) -> None:
         """The first configuration's job of edge ``source``, in the foreground; then the edge's other
         configurations go to the speculative queue."""
         self._foreground += 1
         try:
-            for edge in await asyncio.to_thread(self._jobs, source, turns_deg, self.names[:1]):
-                await self._send(source, edge, background=False)
+            await self._send(source, turns_deg, self.names[0], background=False)
         except asyncio.CancelledError:
             raise
         except Exception as exc:  # noqa: BLE001 - left to the end: the model is still built, the cause logged
@@ -215,27 +223,27 @@ class IncrementalModel:
             if generation != self._generation.get(source):
                 continue  # the view was re-scanned since: its new edge is queued anew
             try:
-                for edge in await asyncio.to_thread(self._jobs, source, turns_deg, self.names[1:]):
+                for name in self.names[1:]:
                     if not await self._quiet(want_queue=False):
                         return
-                    await self._send(source, edge, background=True)
+                    await self._send(source, turns_deg, name, background=True)
             except asyncio.CancelledError:
                 raise
             except Exception as exc:  # noqa: BLE001 - the dynamic stage computes it if it needs it
                 self.decide("speculative pair job failed; the dynamic stage will compute it if needed",
                             source=source, error=str(exc)[:200])
 
-    async def _send(self, source: int, edge: EdgeJob, *, background: bool) -> None:
-        """One job to the registration workers, its result stored; a job stored already is not sent again.
+    async def _send(self, source: int, turns_deg: list[float], configuration: str, *, background: bool) -> None:
+        """Edge ``source``'s views to registration for one configuration; registration builds its job, runs it
+        unless the session stores its result already, and each result that comes back is stored at once.
         ``background``: speculative, run at the workers' lowest CPU priority."""
-        path = self._path(source, edge.fingerprint)
-        if path.is_file():  # finished before a restart: never sent twice
-            return
-        self.sent += 1
-        self.sent_by_configuration[edge.configuration] = self.sent_by_configuration.get(edge.configuration, 0) + 1
-        reply = await self.cell.register_pair(pair_job_message(edge.job, background))
-        result = pair_result_from_message(reply)
-        self.store.save_json(f"{PAIRS_DIR}/{path.name}", pair_record(edge.fingerprint, result))
-        self.decide("pair registered during the acquisition", edge=edge.job.index, source=source,
-                    configuration=edge.configuration, fitness=round(result.fitness, 3),
-                    seconds=round(result.seconds, 2))
+        request = await asyncio.to_thread(self._request, source, turns_deg, configuration, background)
+        reply = await self.cell.register_edge(request)
+        for rec, name in zip(reply.records, reply.configurations, strict=True):
+            self.sent += 1
+            self.sent_by_configuration[name] = self.sent_by_configuration.get(name, 0) + 1
+            path = self._path(source, str(rec["fingerprint"]))
+            self.store.save_json(f"{PAIRS_DIR}/{path.name}", rec)
+            self.decide("pair registered during the acquisition", edge=int(rec["index"]), source=source,
+                        configuration=name, fitness=round(float(rec["fitness"]), 3),
+                        seconds=round(float(rec["seconds"]), 2))

@@ -1,10 +1,16 @@
 """The acquisition state machine: locate → (scan → register → plan grasp → turn) × views → model → done.
 
-States and their allowed transitions are declared in ``TRANSITIONS`` (drawn in docs/orchestrator.md); a
+States and their allowed transitions are declared in ``states.TRANSITIONS`` (drawn in docs/orchestrator.md); a
 transition outside it is a bug and stops the run. Every state's outputs are written to the session folder
 and the journal before the next state starts, so a killed orchestrator resumes at the state it was in
 and re-uses every frame already captured (scans are never captured twice, and never overwritten: a
 re-scan first moves the old attempt aside).
+
+This module drives; every other job of an acquisition is a small module it calls: the records of the
+irreversible steps (``turn_journal``), the cell made ready (``cell_setup``), the scan poses the arm reaches
+(``scan_reach``), the arm's motions (``motion``), the pair work sent to registration (``incremental``), the
+ground-truth evaluation (``ground_truth``), ``report.json`` (``session_report``) and the library insert
+(``library_insert``).
 
 Recovery, as a robot on a real table needs it:
 - an unreachable or colliding motion tries the grasp's next angular offset, then the next grasp;
@@ -27,11 +33,9 @@ from __future__ import annotations
 import asyncio
 import errno
 import logging
-import os
 import shutil
 import time
 from collections.abc import Callable
-from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
@@ -41,13 +45,14 @@ from common.api import GraspPlanReply, ViewResult
 from common.errors import ObjscanError, RemoteError
 from common.log import event
 from common.messages import Grasp
-from common.pose_accuracy import PoseAccuracy
-from common.session_folder import REPORT_FILE, scan_dir, view_dir
-from services.arm.drivers.dynamixel.robot_file import robot_pose_accuracy
+from common.session_folder import view_dir
 from services.orchestrator.cell import Cell
+from services.orchestrator.cell_setup import prepare_cell
 from services.orchestrator.config import AcquisitionConfig
+from services.orchestrator.ground_truth import evaluate_against_twin, journal_accuracy
 from services.orchestrator.incremental import IncrementalModel
 from services.orchestrator.journal import Journal
+from services.orchestrator.library_insert import insert_session_model_async
 from services.orchestrator.limits import name_limit, name_scan_pose_limit
 from services.orchestrator.motion import ArmMotion, GraspFailed
 from services.orchestrator.planning import (
@@ -55,7 +60,6 @@ from services.orchestrator.planning import (
     look_pose,
     object_box,
     radial_offset_deg,
-    scan_pose_candidates,
     turn_sequences,
 )
 from services.orchestrator.recovery import grasp_order, lies_down, plan_mode
@@ -68,36 +72,18 @@ from services.orchestrator.regrasp import (
     yaw_tied,
 )
 from services.orchestrator.reposition import NO_TURN, drift, favoured_spots, reposition_shifts, without_turn
+from services.orchestrator.scan_reach import first_reachable_scan_set, scannable_spot
+from services.orchestrator.session_report import acquisition_report, model_lateness_s, write_report
+from services.orchestrator.states import TERMINAL, TRANSITIONS, State
 from services.orchestrator.topple import topple_reason
+from services.orchestrator.turn_journal import TurnJournal, released_at
 from services.registration.api import with_turn_accuracy
 from services.session_store import SessionStore
 
 log = logging.getLogger("objscan.orchestrator")
 
 SCANS_PER_VIEW = 3
-
-
-class State(StrEnum):
-    LOCATE = "locate"
-    SCAN = "scan"
-    REGISTER = "register"
-    PLAN_GRASP = "plan_grasp"
-    TURN = "turn"
-    MODEL = "model"
-    DONE = "done"
-    FAILED = "failed"
-    STOPPED = "stopped"
-
-
-TRANSITIONS: dict[State, set[State]] = {
-    State.LOCATE: {State.SCAN},
-    State.SCAN: {State.REGISTER},
-    State.REGISTER: {State.PLAN_GRASP, State.MODEL, State.SCAN},
-    State.PLAN_GRASP: {State.TURN, State.SCAN},
-    State.TURN: {State.SCAN, State.PLAN_GRASP},
-    State.MODEL: {State.DONE},
-}
-TERMINAL = {State.DONE, State.FAILED, State.STOPPED}
+__all__ = ["Acquisition", "AcquisitionFailed", "State", "TERMINAL", "TRANSITIONS"]
 
 
 class AcquisitionFailed(ObjscanError):
@@ -123,12 +109,13 @@ class Acquisition:
         if self.resumed:
             self.config = AcquisitionConfig.from_dict(self.j.config)
             self.decide("resumed", state=self.j.state, view=self.j.view)
-            if self.j.pending_rescan:  # killed while moving the old attempt aside: finish it
-                self._finish_rescan()
-                self.j.state = State.SCAN.value
+        self.turns = TurnJournal(self.j, store, self.config.turn_deg)
+        if self.resumed and self.j.pending_rescan:  # killed while moving the old attempt aside: finish it
+            self.turns.finish_rescan()
+            self.j.state = State.SCAN.value
         self._plan: GraspPlanReply | None = None
-        self.motion = ArmMotion(cell, self.config.turn, self.decide, self._journal_turn_intent,
-                                lambda seq: self._record_turn(self.view, seq.direction, relocation_shift(seq)))
+        self.motion = ArmMotion(cell, self.config.turn, self.decide, self.turns.intent,
+                                lambda seq: self.turns.record_turn(self.view, seq.direction, relocation_shift(seq)))
         self.incremental = IncrementalModel(store, self.config.dynamic_config, cell,
                                             enabled=self.config.incremental, decide=self.decide)
 
@@ -195,7 +182,7 @@ class Acquisition:
                 await self.cell.reset_estop()
             if self.j.turn_intent:  # before anything opens the gripper: it may hold the object
                 await self._recover_turn()
-            await self._prepare_cell()
+            await prepare_cell(self.cell, self.config, self.j, self.decide)
             while self.state not in TERMINAL:
                 if self.stop_requested.is_set():
                     raise asyncio.CancelledError
@@ -261,40 +248,6 @@ class Acquisition:
         self.decide("failed", code=code, message=message)
         await self._park()
 
-    async def _prepare_cell(self) -> None:
-        """First start: reset the twin to this session's object/profile/seed (sim cells only)."""
-        if self.j.simulated is None:
-            try:
-                x, y = self.config.workspace_center
-                form = {k: v for k, v in (("scale", self.config.object_scale),
-                                          ("up_axis", self.config.object_up_axis)) if v is not None}
-                state = await self.cell.sim("reset", object=self.config.object, profile=self.config.profile,
-                                            seed=self.config.seed, x=float(x), y=float(y),
-                                            physics=self.config.physics, **form)
-                self.j.simulated = True
-                self._state_pose_accuracy(state.get("pose_accuracy"))
-                turn_sigma = state.get("turn_accuracy_deg")
-                if isinstance(turn_sigma, (int, float)) and turn_sigma > 0:  # session.json keeps it (reconstruct)
-                    self.config.turn_accuracy_deg = float(turn_sigma)
-                    self.j.config["turn_accuracy_deg"] = self.config.turn_accuracy_deg
-                if self.config.force_first_slip:
-                    await self.cell.sim("force_slip")
-            except ObjscanError as exc:
-                if exc.code not in ("unavailable", "timeout"):
-                    raise
-                self.j.simulated = False
-                self._state_pose_accuracy(robot_pose_accuracy(os.environ.get("OBJSCAN_ROBOT_CONFIG")).to_dict())
-            self.decide("cell ready", simulated=self.j.simulated, pose_accuracy=self.config.pose_accuracy)
-        await self.cell.gripper(0.1, self.config.turn.gripper_force)
-
-    def _state_pose_accuracy(self, accuracy: dict | None) -> None:
-        """Record the arm's camera pose accuracy the cell states (unless the run's config gave one): every
-        static registration gets it, and session.json keeps it for ``reconstruct``."""
-        if self.config.pose_accuracy or not accuracy:
-            return
-        self.config.pose_accuracy = PoseAccuracy.from_dict(accuracy).to_dict()
-        self.j.config["pose_accuracy"] = self.config.pose_accuracy
-
     async def _park(self) -> None:
         """Arm home with the gripper open: the safe state after a failure."""
         for step in (lambda: self.cell.gripper(0.1), lambda: self.cell.clear_object_box(),
@@ -349,7 +302,7 @@ class Acquisition:
                 await self.cell.move("home", speed=0.6)
             except RemoteError as exc:
                 self.decide("could not go home before choosing scan poses", code=exc.code)
-        candidate, reasons = await self._first_reachable_scan_set(center, height)
+        candidate, reasons = await first_reachable_scan_set(self.cell, self.config.scan, center, height)
         if candidate is not None:
             self.j.scan_sets[key] = [T.tolist() for T in candidate]
             return candidate
@@ -357,41 +310,9 @@ class Acquisition:
                                 f"limit: {name_scan_pose_limit(reasons)}",
                                 detail={"center": center.tolist(), "reasons": reasons[:6], "limit": "reach"})
 
-    async def _first_reachable_scan_set(self, center: np.ndarray, height: float, start_q: np.ndarray | None = None
-                                        ) -> tuple[list[np.ndarray] | None, list[str]]:
-        """The first candidate set of scan poses around an object at ``center`` whose every pose the arm
-        reaches (dry runs, from ``start_q`` when given, else from the current posture), and the refusals."""
-        reasons: list[str] = []
-        for candidate in scan_pose_candidates(center, height, self.config.scan):
-            try:
-                for T in candidate:
-                    await self.cell.move("pose", target=T, q=start_q, frame="camera", dry_run=True)
-            except RemoteError as exc:
-                if exc.code in ("estop_latched", "busy"):
-                    raise
-                reasons.append(exc.code)
-                continue
-            return candidate, reasons
-        return None, reasons
-
     async def _scannable_spot(self, spot: np.ndarray, height: float, cache: dict[tuple, bool]) -> bool:
-        """Whether the object set down at ``spot`` can be scanned there: a relocated set-down that leaves no
-        reachable set of scan poses would end the acquisition at the next view, so such a spot is never
-        chosen. Checked from the home posture, where the next view's scan poses are planned from."""
-        key = tuple(np.round(np.asarray(spot, float)[:2], 3))
-        if key not in cache:
-            try:
-                start_q: np.ndarray | None = np.asarray((await self.cell.move("home", dry_run=True)).q, float)
-            except RemoteError as exc:
-                if exc.code in ("estop_latched", "busy"):
-                    raise
-                start_q = None  # the way home is blocked from here: plan from the current posture instead
-            candidate, reasons = await self._first_reachable_scan_set(np.asarray(spot, float), height, start_q)
-            cache[key] = candidate is not None
-            if candidate is None:
-                self.decide("relocated spot leaves no reachable scan poses", spot=list(key),
-                            limit=name_scan_pose_limit(reasons))
-        return cache[key]
+        """Whether the object set down at ``spot`` can be scanned there (``scan_reach.scannable_spot``)."""
+        return await scannable_spot(self.cell, self.config.scan, spot, height, cache, self.decide)
 
     async def scan(self) -> State:
         k = self.view
@@ -478,11 +399,7 @@ class Acquisition:
                                     detail={"view": k, "limit": limit.split(":")[0], "recoveries": tried})
         self.j.rescans[str(k)] = n
         self.j.counters.rescans += 1
-        # intent first: a kill between the move and the next journal write must not lose the view's frames
-        self.j.pending_rescan = {"view": k, "attempt": n}
-        self.j.scan_sets.pop(str(k), None)
-        self.store.save_journal(self.j.to_dict())
-        self._finish_rescan()
+        self.turns.begin_rescan(k, n)  # intent first, then the old attempt moves aside
         self.decide("re-scan", reason=reason, rescan=n)
         return State.SCAN
 
@@ -501,18 +418,6 @@ class Acquisition:
         if self.j.topple_restarts:
             out.append(f"restart after topple x{self.j.topple_restarts}")
         return out
-
-    def _finish_rescan(self) -> None:
-        """Move the view's old attempt aside (idempotent: a resume calls it again) and clear the intent."""
-        pending = self.j.pending_rescan
-        k, n = int(pending["view"]), int(pending["attempt"])
-        src = view_dir(self.store.path, k)
-        dst = src.with_name(f"{src.name}_{pending.get('aside') or f'attempt{n}'}")
-        if src.exists() and not dst.exists():  # keep every captured frame: the old attempt moves aside
-            shutil.move(str(src), str(dst))
-        self.j.pending_rescan = None
-        self.j.view = k
-        self.j.scan_sets.pop(str(k), None)
 
     async def plan_grasp(self) -> State:
         k = self.view
@@ -606,7 +511,7 @@ class Acquisition:
                         code=exc.code, message=exc.message[:200])
             return None
         shift = relocation_shift(seq)
-        if seq.direction == NO_TURN:  # already journalled at the release (``_record_reposition``)
+        if seq.direction == NO_TURN:  # already journalled at the release (``TurnJournal.record_reposition``)
             self.decide("repositioned: picked and set down without a turn; the view is scanned again there",
                         grasp=gi, pose=seq.name, kind=grasp.kind, to=self.j.centers.get(str(k), [0, 0])[:2],
                         shift=None if shift is None else np.round(shift[:2], 3).tolist())
@@ -619,7 +524,7 @@ class Acquisition:
         self.decide("turned", grasp=gi, pose=seq.name, kind=grasp.kind, direction=seq.direction,
                     relocated=None if shift is None else np.round(shift[:2], 3).tolist())
         self._plan = None
-        return State.SCAN  # already journalled at the release (``_record_turn``)
+        return State.SCAN  # already journalled at the release (``TurnJournal.record_turn``)
 
     async def _next_turn_possible(self, grasp: Grasp, seq: TurnPoses, center: np.ndarray) -> bool:
         """Dry-run the turn after this one: the same grasp where ``seq`` leaves the object, turned again the
@@ -805,62 +710,7 @@ class Acquisition:
         self.decide("no reposition executable", checks=checks)
         return None
 
-    # ------------------------------------------------------------------------------------- turn journal
-    def _journal_turn_intent(self, phase: str | None, **fields: Any) -> None:
-        """Write where a turn stands before the next irreversible step: ``closing`` (the gripper is about
-        to close), ``holding`` (the object is held and may be lifted and turned), or ``None`` (over)."""
-        if phase == "closing":
-            fields = {"view": self.view, **fields}
-        if phase is None:
-            self.j.turn_intent = None
-            self.j.holding = False
-        else:
-            self.j.turn_intent = {**(self.j.turn_intent or {}), **fields, "phase": phase}
-            self.j.holding = phase == "holding"
-        self.store.save_journal(self.j.to_dict())
-
-    def _record_turn(self, k: int, direction: int, shift: np.ndarray | None = None) -> None:
-        """The object is released where the turn ends: the next view, its commanded turn, one journal write.
-        A relocated set-down (``shift``) also gives the next view's expected centre: its scan poses are
-        placed around where the object now stands, not where it stood. A pick-and-place without a turn
-        (a reposition) is recorded by ``_record_reposition`` instead: no view is added."""
-        if direction == NO_TURN:
-            self._record_reposition(k, shift)
-            return
-        if shift is not None and str(k) in self.j.centers:
-            c = np.asarray(self.j.centers[str(k)], float)
-            self.j.centers[str(k + 1)] = (c + np.asarray(shift, float)).tolist()
-            self.j.heights[str(k + 1)] = self.j.heights[str(k)]
-        self.j.turns_deg.append(self.j.turns_deg[k] + direction * self.config.turn_deg)
-        if self.j.turn_direction is None:
-            self.j.turn_direction = direction
-        self.j.view = k + 1
-        self.j.grasp_mode = "auto"
-        self.j.state = State.SCAN.value
-        self.j.turn_intent = None
-        self.j.holding = False
-        self.store.save_journal(self.j.to_dict())
-
-    def _record_reposition(self, k: int, shift: np.ndarray | None) -> None:
-        """The object was set down unturned at another spot: view ``k`` keeps its commanded turn and is
-        scanned again where the object now stands (its old frames are moved aside, never deleted)."""
-        d = np.zeros(3) if shift is None else np.asarray(shift, float)
-        if str(k) in self.j.centers:
-            self.j.centers[str(k)] = (np.asarray(self.j.centers[str(k)], float) + d).tolist()
-        n = 1 + sum(1 for e in self.j.regrasps.get(str(k), []) if e.get("strategy") == "reposition")  # folder name
-        self.j.regrasps.setdefault(str(k), []).append(
-            {"strategy": "reposition", "restart": self.j.topple_restarts, "shift": np.round(d, 4).tolist(),
-             "to": np.round(np.asarray(self.j.centers.get(str(k), d), float)[:2], 4).tolist()})
-        self.j.counters.repositions += 1
-        self.j.grasp_mode = "auto"
-        self.j.turn_intent = None
-        self.j.holding = False
-        self.j.pending_rescan = {"view": k, "attempt": n, "aside": f"moved{n}"}
-        self.store.save_journal(self.j.to_dict())
-        self._finish_rescan()
-        self.j.state = State.SCAN.value
-        self.store.save_journal(self.j.to_dict())
-
+    # ------------------------------------------------------------------------------------- resume a turn
     async def _recover_turn(self) -> None:
         """Settle a turn the previous orchestrator left open, from what the arm reports.
 
@@ -875,17 +725,14 @@ class Acquisition:
         k, phase = int(intent["view"]), intent.get("phase")
         opening = float(intent.get("opening", 0.1))
         state = await self.cell.state()
-        T = np.asarray(state.T_base_gripper, float)
-        R = np.asarray(intent["release_T"], float)
-        angle = np.degrees(np.arccos(np.clip((np.trace(T[:3, :3].T @ R[:3, :3]) - 1) / 2, -1.0, 1.0)))
-        at_release = float(np.linalg.norm(T[:3, 3] - R[:3, 3])) < 0.01 and angle < 5.0
+        at_release = released_at(state.T_base_gripper, intent["release_T"])
         closed = float(state.gripper_opening) < opening - 0.005
         self.decide("recovering an interrupted turn", phase=phase, at_release=bool(at_release),
                     gripper_closed=bool(closed), gripper_opening=round(float(state.gripper_opening), 4))
         if phase == "holding" and at_release:
             if closed:
                 await self.cell.gripper(opening, self.config.turn.gripper_force)
-            self._record_turn(k, int(intent["direction"]), intent.get("shift"))
+            self.turns.record_turn(k, int(intent["direction"]), intent.get("shift"))
             self.decide("turn had finished before the restart: recorded, not repeated" if int(intent["direction"])
                         else "reposition had finished before the restart: recorded, the view is scanned again",
                         view=self.view)
@@ -894,7 +741,7 @@ class Acquisition:
             if phase == "holding":  # possibly lifted: lower it back onto the table first
                 await self.motion.set_down_here(self.config.turn.lift)
             await self.cell.gripper(opening, self.config.turn.gripper_force)
-        self._journal_turn_intent(None)
+        self.turns.intent(None)
         await self.motion.escape(np.asarray(intent["center"], float), float(intent["height"]))
         self.j.view = k
         if phase == "holding":  # the object may have turned part of the way: this view is no longer true
@@ -913,58 +760,26 @@ class Acquisition:
         config = with_turn_accuracy(self.incremental.config, self.config.turn_accuracy_deg)  # as reconstruct does
         result = await self.cell.build_model(views, turns, {**config, "reuse_pairs": reuse})
         path = self.store.save_model(result.cloud)
-        last_scan = scan_dir(self.store.path, n - 1, SCANS_PER_VIEW - 1) / "meta.json"
-        if last_scan.is_file():  # the model's lateness: from the last view's last scan saved to the model saved
-            self.j.model_ready_s_after_last_view = round(path.stat().st_mtime - last_scan.stat().st_mtime, 2)
+        lateness = model_lateness_s(self.store, path, n - 1, SCANS_PER_VIEW - 1)
+        if lateness is not None:
+            self.j.model_ready_s_after_last_view = lateness
         self.j.model_path = str(path)
         self.j.model_accepted = bool(result.figures.get("accepted", True))
         self.j.model_why = str(result.figures.get("why", ""))
-        report: dict[str, Any] = {"model": str(path), "accepted": self.j.model_accepted, "why": self.j.model_why,
-                                  "points": len(result.cloud), "model_figures": result.figures,
-                                  "turns_commanded_deg": turns, "incremental": self.config.incremental,
-                                  "model_ready_s_after_last_view": self.j.model_ready_s_after_last_view}
+        accuracy = None
         if self.config.evaluate and self.j.simulated:
-            report["accuracy"] = await self._evaluate(result.cloud.xyz)
-            self.j.accuracy = {k: report["accuracy"][k] for k in ("chamfer_mm", "accuracy_mm", "completeness_mm",
-                                                                      "fscore_2mm", "fscore_5mm")
-                                  if k in report["accuracy"]}
+            accuracy = await evaluate_against_twin(self.cell, self.store, result.cloud.xyz)
+            self.j.accuracy = journal_accuracy(accuracy)
         self.decide("model built" if self.j.model_accepted else "model built, NOT accepted",
                     points=len(result.cloud), accuracy=self.j.accuracy, why=self.j.model_why)
-        report.update({"session": str(self.store.path), "config": self.j.config, "counters": self.j.counters.to_dict(),
-                       "timings_s": self.j.timings_s, "seconds_total": round(time.time() - self.j.started, 2),
-                       "decisions": self.j.decisions,
-                       "views": [self.store.load_json(f"view_{k:02d}/view.json").get("figures", {}) for k in range(n)]})
-        self.store.save_json(REPORT_FILE, report)
+        write_report(self.store, acquisition_report(self.j, self.store, result, turns, self.config.incremental,
+                                                    accuracy))
         if self.library is not None:
-            try:
-                from services.library import add_session_model
-
-                entry = await asyncio.to_thread(add_session_model, self.library, self.store.path)
-                self.j.library_entry = entry
-                self.decide("model added to the library", entry=entry, library=str(self.library))
-            except Exception as exc:  # the session folder keeps the model: a library failure loses nothing
-                self.decide("could not add the model to the library", error=repr(exc)[:300])
+            inserted = await insert_session_model_async(self.library, self.store.path)
+            if inserted.ok:
+                self.j.library_entry = inserted.entry
+                self.decide("model added to the library", entry=inserted.entry, library=str(self.library))
+            else:
+                self.decide("could not add the model to the library", error=inserted.error)
         await self._park()
         return State.DONE
-
-    async def _evaluate(self, model_xyz: np.ndarray) -> dict[str, Any]:
-        """Chamfer/F-score against the twin's ground-truth surface, posed as the object stood in view 0."""
-        from services.registration.api import evaluate_model
-
-        first = self.store.load_scan(0, 0)
-        T0 = first.meta.get("T_base_object_true")
-        gt = await self.cell.sim("gt_points", n=60000)
-        xyz = np.asarray(gt["xyz"], float)
-        T_now = np.asarray(gt["T_base_object"], float)
-        if T0 is not None:
-            T0 = np.asarray(T0, float)
-            xyz = (xyz - T_now[:3, 3]) @ T_now[:3, :3] @ T0[:3, :3].T + T0[:3, 3]
-        model = np.asarray(model_xyz, float)
-        # The true pose at view 0 places the ground truth: ICP-align from there (as the paper aligns), never
-        # from scratch, where a nearly square carton can lock 90 degrees off. Also report the raw figures.
-        aligned = await asyncio.to_thread(evaluate_model, model, xyz, align=True, init_T=np.eye(4))
-        raw = await asyncio.to_thread(evaluate_model, model, xyz, align=False)
-        out = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in aligned.items()}
-        out["unaligned"] = {k: v for k, v in raw.items() if isinstance(v, float)}
-        out["gt_posed_from_truth"] = T0 is not None
-        return out

@@ -16,8 +16,10 @@ What it offers, by job:
   ``view_from_result`` / ``views_from_results`` (a ``ViewResult`` off the wire or the session folder); all
   three place the view's centre with ``view_center``, the one definition;
 - **dynamic stage** (views -> one model): ``build_model``, ``dynamic_config`` (the config from a request's
-  map), ``model_cloud``, ``DynamicConfig``, ``RegisteredModel``, and the pair work the incremental model
-  runs during an acquisition (``edge_jobs``, ``configuration_names``, the pair job wire forms and records);
+  map), ``model_cloud``, ``DynamicConfig``, ``RegisteredModel``, and the pair work of the incremental model
+  during an acquisition: the registration side builds, fingerprints and runs an edge's jobs from the views
+  the orchestrator sends (``register_edge`` = ``edge_work`` + ``edge_reply``; ``edge_jobs``,
+  ``configuration_names``, the pair job wire forms and records);
 - **offline pipeline**: ``reconstruct`` (``objscan reconstruct``);
 - **evaluation**: ``evaluate_model``, ``chamfer_metrics``, ``point_errors``, ``sample_mesh``,
   ``view_agreement``, the scan pose errors;
@@ -38,7 +40,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from common.api import ViewResult
+from common.api import EdgeReply, EdgeRequest, ViewResult
 from common.errors import InvalidRequest
 from common.messages import PointCloud, RGBDFrame
 
@@ -246,6 +248,40 @@ def dynamic_configurations(config: dict) -> list[str]:
     return configuration_names(dynamic_config(config))
 
 
+def edge_work(request: EdgeRequest) -> list[EdgeJob]:
+    """The jobs an ``EdgeRequest`` asks for that are not done yet: the edge's jobs in the requested
+    configurations (``edge_jobs``), less those whose fingerprint the session already stores (``known``).
+    CPU: the service runs it in its executor. A view the edge needs and the request lacks is a typed error."""
+    views = {int(v.view): v for v in request.views}
+    missing = sorted(set(edge_views_needed(request.config, request.source)) - set(views))
+    if missing:
+        raise InvalidRequest(f"edge {request.source}: the request lacks view(s) {missing}",
+                             detail={"missing": missing, "source": request.source})
+    known = set(request.known)
+    jobs = edge_jobs(views, request.turns_deg, request.config, request.source, request.configurations or None)
+    return [e for e in jobs if e.fingerprint not in known]
+
+
+def edge_reply(jobs: Sequence[EdgeJob], results: Sequence[Any]) -> EdgeReply:
+    """The ``EdgeReply`` of ``jobs`` run to ``results`` (``PairResult`` in job order): each result stored
+    with its job's fingerprint (``pair_record``), and its configuration."""
+    from services.registration.pair_wire import pair_record
+
+    return EdgeReply(records=[pair_record(e.fingerprint, r) for e, r in zip(jobs, results, strict=True)],
+                     configurations=[e.configuration for e in jobs])
+
+
+def register_edge(request: EdgeRequest, map_pairs: Any = None) -> EdgeReply:
+    """An ``EdgeRequest`` answered in this process: the jobs not done yet (``edge_work``) run by ``map_pairs``
+    (a ``MapPairs``: the service spreads them over its workers; None: one after the other, here)."""
+    from services.registration.dynamic.pair import register_pair
+
+    jobs = edge_work(request)
+    run = map_pairs if map_pairs is not None else (lambda js: [register_pair(j) for j in js])
+    return edge_reply(jobs, run([e.job for e in jobs]) if jobs else [])
+
+
 __all__ = sorted({*_EXPORTS, *_ALIASES, "EdgeJob", "dynamic_config", "dynamic_configurations", "edge_jobs",
-                  "edge_views_needed", "model_cloud", "register_scans", "session_dynamic_config",
+                  "edge_reply", "edge_views_needed", "edge_work", "model_cloud", "register_edge", "register_scans",
+                  "session_dynamic_config",
                   "static_config", "view_from_result", "view_result", "views_from_results", "with_turn_accuracy"})

@@ -20,7 +20,7 @@ from typing import Any, Protocol
 import zenoh
 
 from common import keys
-from common.api import DynamicRequest, ModelResult
+from common.api import DynamicRequest, EdgeReply, EdgeRequest, ModelResult
 from common.codec import Message, decode
 from common.errors import InvalidRequest, RemoteError, WireError
 from common.log import event
@@ -30,6 +30,8 @@ from services.registration.api import (
     PairResultMessage,
     build_model,
     dynamic_config,
+    edge_reply,
+    edge_work,
     model_cloud,
     pair_job_from_message,
     pair_job_message,
@@ -192,6 +194,22 @@ async def register_pair_distributed(service: ServiceContext, msg: Message | None
     return pair_result_message(result)
 
 
+async def register_edge_distributed(service: ServiceContext, msg: Message | None) -> EdgeReply:
+    """One edge of the incremental model (``registration/edge``): its jobs are built and fingerprinted here
+    from the views the orchestrator sent (CPU, in the executor), those not stored yet run on the live
+    workers (a worker that dies has its job re-run by another), and the results come back with their
+    fingerprints. The orchestrator never builds or sees a pair job."""
+    if not isinstance(msg, EdgeRequest):
+        raise InvalidRequest("expected an EdgeRequest", detail={"got": type(msg).__name__})
+    jobs = await service.run_cpu(edge_work, msg)
+    if not jobs:
+        return edge_reply([], [])
+    stats: dict = {}
+    run = distributed_map(service.session, stats, service.instance, background=msg.background)
+    results = await asyncio.to_thread(run, [e.job for e in jobs])
+    return edge_reply(jobs, results)
+
+
 async def build_model_distributed(service: ServiceContext, msg: Message | None) -> ModelResult:
     if not isinstance(msg, DynamicRequest):
         raise InvalidRequest("expected a DynamicRequest", detail={"got": type(msg).__name__})
@@ -206,4 +224,4 @@ async def build_model_distributed(service: ServiceContext, msg: Message | None) 
     return ModelResult(cloud=model_cloud(result), figures=figures)
 
 
-__all__ = ["build_model_distributed", "distributed_map", "register_pair_distributed"]
+__all__ = ["build_model_distributed", "distributed_map", "register_edge_distributed", "register_pair_distributed"]

@@ -37,7 +37,8 @@ def view_results():
 
 
 class PairCell:
-    """Answers pair jobs like a registration worker would, but with a stand-in result; ``gate`` holds them."""
+    """Answers edge requests as the registration service does (the same ``register_edge``: its jobs built and
+    fingerprinted from the views sent), with a stand-in pair result; ``gate`` holds the replies."""
 
     robot = "robot0"
 
@@ -49,20 +50,32 @@ class PairCell:
         self.started = asyncio.Event()
         self.dynamic_config: dict | None = None
 
-    async def register_pair(self, msg):  # noqa: ANN001, ANN201
-        from services.registration.api import PairResult, pair_job_from_message, pair_result_message
+    def _stand_in(self, jobs):  # noqa: ANN001, ANN202 - a MapPairs: the worker's answer, recognisable per edge
+        from services.registration.api import PairResult
 
-        job = pair_job_from_message(msg)
-        self.jobs.append((job.source_view, job.target_view))
-        self.background.append(msg.background)
-        self.started.set()
+        out = []
+        for job in jobs:
+            T = np.eye(4)
+            T[0, 3] = 0.001 * job.source_view
+            out.append(PairResult(job.index, job.source_view, job.target_view, T, 0.8, 0.001, 0.5, "prior", "full",
+                                  0.1))
+        return out
+
+    async def register_edge(self, request):  # noqa: ANN001, ANN201
+        from common.api import EdgeRequest
+        from services.registration.api import edge_reply, edge_work
+
+        request = EdgeRequest.decode(request.encode())  # what crosses the wire
+        jobs = await asyncio.to_thread(edge_work, request)
+        for e in jobs:
+            self.jobs.append((e.job.source_view, e.job.target_view))
+            self.background.append(request.background)
+        if jobs:
+            self.started.set()
         if self.gate is not None:
             await self.gate.wait()
         await asyncio.sleep(self.delay)  # a worker takes its time: jobs overlap
-        T = np.eye(4)
-        T[0, 3] = 0.001 * job.source_view  # recognisable per edge
-        return pair_result_message(PairResult(job.index, job.source_view, job.target_view, T, 0.8, 0.001, 0.5,
-                                              "prior", "full", 0.1))
+        return edge_reply(jobs, self._stand_in([e.job for e in jobs]))
 
     async def build_model(self, views, turns, config):  # noqa: ANN001, ANN201
         self.dynamic_config = config
