@@ -196,6 +196,8 @@ def measure(name: str, tmp: Path, sessions: Path, env: dict[str, str], seed: int
         "static_s": report["summary"].get("total_s"),
         "static_cpu_s": report["summary"].get("cpu_s"),
         "threads": report.get("threads"),
+        # CPU seconds per static step, summed over the views (each view's own thread): where the stage's time went
+        "static_cpu_steps": _summed([v.get("cpu_timings_s", {}) for v in views]),
         "static_max_trans_err_mm": report["summary"].get("max_trans_err_mm"),
         "global_fallbacks": sum(s.get("path") == "global" for s in scans),
         "global_fallback_fraction": sum(s.get("path") == "global" for s in scans) / max(1, len(scans)),
@@ -223,6 +225,15 @@ def measure(name: str, tmp: Path, sessions: Path, env: dict[str, str], seed: int
         row["chamfer_mm"], row["oracle_chamfer_mm"] = oracle_chamfer(session, out, truth)
     row["chamfer_ratio"] = row["over_oracle"] = row["chamfer_mm"] / row["oracle_chamfer_mm"]
     return row
+
+
+def _summed(parts: list[dict[str, float]]) -> dict[str, float]:
+    """Per-key sums of ``parts`` (rounded), keys in first-seen order."""
+    out: dict[str, float] = {}
+    for part in parts:
+        for k, v in part.items():
+            out[k] = out.get(k, 0.0) + float(v)
+    return {k: round(v, 3) for k, v in out.items()}
 
 
 def _median(rows: list[dict[str, Any]], key: str) -> float | None:
