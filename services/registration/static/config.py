@@ -49,11 +49,7 @@ class StaticConfig:
     # minimum while the reverse one, whose correspondences come from the other image, does not: realistic
     # milk/soup/sauce pairs with the forward run alone 3 of 12 milk pairs > 1 mm (worst 8.0 mm), reseeded
     # 0 of 12 (worst 0.57 mm), for ~0.18 CPU-s more per pair. None: no seed pass (the arm's prior seeds).
-    # (16, 4), was (16, 16): the seed only has to land in the forward run's basin; the last 12 iterations at the
-    # seed's finer level changed no pose (worst / mean pair error over 12 views the same to 1 um: harsh box
-    # 0.314 / 0.173 mm, harsh cylinder 0.826 / 0.352 mm, realistic milk 0.568 / 0.222 mm) for ~0.09 CPU-s a
-    # pair (the seed pass 0.19 -> 0.11 s). A coarser seed image (step 4) is not enough: 27 mm on the cylinder
-    odometry_seed_iterations: tuple[int, ...] | None = (16, 4)  # per pyramid level of the seed pass
+    odometry_seed_iterations: tuple[int, ...] | None = (16, 16)  # per pyramid level of the seed pass
     odometry_seed_step: int = 2  # the seed pass's images are this much coarser than the forward run's
     odometry_hybrid: bool = True  # photometric + depth terms (False: photometric only)
     odometry_max_depth_diff: float = 0.02  # m; pixel pairs farther apart in depth are not matched
