@@ -1,50 +1,140 @@
-"""The peer of ``bench reconstruct``: Open3D's multiway-registration tutorial pipeline, written from its API.
+"""The peer of ``bench reconstruct``: an Open3D-tutorial pipeline from the session's raw frames, independent of
+objscan (it imports nothing of objscan's: only Open3D and NumPy).
 
-What the tutorial does, step by step, and what this peer does with it:
+What a user of Open3D's tutorials writes to get one model out of an objscan session folder
+(``view_KK/scan_J/{color,depth}.png`` + ``meta.json`` with the arm's believed camera pose; ``session.json`` with
+each view's commanded turn), step by step:
 
-1. each point cloud downsampled on a voxel grid, normals estimated (radius 2 voxels, 30 neighbours);
-2. every pair (s, t), s < t: point-to-plane ICP coarse (max correspondence 15 voxels) then fine (1.5
-   voxels), and the information matrix of the fine result;
-3. a pose graph: the chain of consecutive pairs (odometry) gives each node's pose and a certain edge, every
-   other pair a loop-closure edge marked uncertain;
-4. Levenberg-Marquardt global optimisation (correspondence 1.5 voxels, edge prune threshold 0.25,
-   reference node 0);
-5. the clouds transformed by their optimised poses, concatenated and downsampled (fusion).
+1. **Per view, a fragment** (the reconstruction system's "make fragments", the RGBD-image tutorial): each scan's
+   colour and depth read as an ``RGBDImage``; scans 1.. registered to scan 0 by RGB-D odometry (the odometry
+   tutorial: hybrid term, default ``OdometryOption``) from the arm's relative pose; each scan's point cloud
+   (``create_from_rgbd_image``) put in ``base`` by scan 0's arm pose and its odometry, concatenated.
+2. **Per view, the object** (the point-cloud tutorial): a crop around where the arm looks (an axis-aligned box
+   about scan 0's centre-pixel point, from just under the table up), voxel down-sampling, the table removed as
+   the dominant RANSAC plane (``segment_plane``), the largest DBSCAN cluster kept.
+3. **The multiway-registration tutorial** on the view objects: normals (radius 2 voxels, 30 neighbours); every
+   pair point-to-plane ICP coarse (15 voxels) then fine (1.5 voxels) from the arm's prior (the commanded turn
+   about the table normal through each view's object centre) and its information matrix; odometry edges along
+   the chain, loop closures (uncertain) for the rest; Levenberg-Marquardt global optimisation (correspondence
+   1.5 voxels, edge prune threshold 0.25, reference node 0).
+4. **Fusion**: every view object by its optimised pose, concatenated and down-sampled to 1 mm.
 
-The tutorial's scenes are consecutive frames of a moving camera, so it starts every pair from identity and
-uses a 2 cm voxel for rooms. Here the clouds are an object turned ~30 degrees between views, so the voxel is
-scaled to objects (``VOXEL`` = 2 mm: coarse 30 mm, fine 3 mm) and each pair starts from the same prior
-objscan's dynamic stage has: the commanded turn about the table normal through each view's object centre.
+The tutorial's numbers are for rooms (2 cm voxel, 1 cm plane distance); here they are scaled to objects by one
+voxel, ``VOXEL`` = 2 mm (plane distance 2.5 voxels, DBSCAN eps 5 voxels). The views are processed on a thread
+per core (Open3D releases the GIL, as objscan's static stage does); Open3D keeps its own default threading.
 
-**Its input** (all of it from the same session and the same ``objscan reconstruct`` run, so the peer is
-compared on exactly what the dynamic stage gets): the static stage's isolated object cloud of each view
-(``OUT/views/view_KK.ply``: the view's scans registered, table and background removed, in ``base``), each
-view's object centre and table normal (``OUT/report.json``) and the commanded cumulative turns
-(``SESSION/session.json``). The peer does not isolate the object itself; ``bench reconstruct`` adds the
-static stage's wall (which produced that input) to the peer's own wall in ``peer_seconds``.
-
-Run as a process (``python -m bench.multiway_peer OUT SESSION MODEL``) so that its wall includes its
-imports as objscan's CLI wall does; it writes the fused model to MODEL and prints its figures as JSON.
+Run as a process (``python -m bench.multiway_peer SESSION MODEL``) so that its wall includes its imports as
+objscan's CLI wall does; it writes the fused model to MODEL and prints its figures as JSON.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import open3d as o3d
 
-from common.session_folder import REPORT_FILE, SESSION_FILE
-
 VOXEL = 0.002  # m: the tutorial's voxel scaled from rooms to objects
 COARSE = 15 * VOXEL  # the tutorial's coarse and fine correspondence distances, in voxels
 FINE = 1.5 * VOXEL
+PLANE_DISTANCE = 2.5 * VOXEL  # segment_plane's inlier distance (the tutorial's 1 cm, scaled)
+PLANE_ITERATIONS = 1000  # the tutorial's
+DBSCAN_EPS = 5 * VOXEL
+DBSCAN_MIN_POINTS = 10  # the tutorial's
+CROP_HALF_WIDTH = 0.15  # m: the crop's half width about where the arm looks (objects are < 10 cm across)
+CROP_BELOW, CROP_ABOVE = 0.02, 0.35  # m below / above the table top (z = 0 in base)
+DEPTH_TRUNC = 1.2  # m: farther is background
 FUSION_VOXEL = 0.001  # the fused model's grid, as objscan's model and the true-pose fusion
 reg = o3d.pipelines.registration
+
+
+# ------------------------------------------------------------------------------------ the session's raw frames
+
+
+def read_scan(folder: Path) -> tuple[o3d.geometry.RGBDImage, o3d.camera.PinholeCameraIntrinsic, np.ndarray, float]:
+    """One scan folder: (RGBD image, intrinsics, the arm's believed T_base_camera, depth scale)."""
+    meta = json.loads((folder / "meta.json").read_text())
+    k = meta["intrinsics"]
+    intrinsic = o3d.camera.PinholeCameraIntrinsic(k["width"], k["height"], k["fx"], k["fy"], k["cx"], k["cy"])
+    rgbd = o3d.geometry.RGBDImage.create_from_color_and_depth(
+        o3d.io.read_image(str(folder / "color.png")), o3d.io.read_image(str(folder / "depth.png")),
+        depth_scale=1.0 / float(meta["depth_scale"]), depth_trunc=DEPTH_TRUNC, convert_rgb_to_intensity=False)
+    return rgbd, intrinsic, np.asarray(meta["T_base_camera"], dtype=float).reshape(4, 4), float(meta["depth_scale"])
+
+
+def _gray(rgbd: o3d.geometry.RGBDImage) -> o3d.geometry.RGBDImage:
+    """The intensity + depth image the odometry takes (the colour one keeps its colour for the cloud)."""
+    depth = np.asarray(rgbd.depth)
+    color = o3d.geometry.Image(np.ascontiguousarray((np.asarray(rgbd.color)).astype(np.uint8)))
+    return o3d.geometry.RGBDImage.create_from_color_and_depth(
+        color, o3d.geometry.Image(np.ascontiguousarray(depth)), depth_scale=1.0, depth_trunc=DEPTH_TRUNC,
+        convert_rgb_to_intensity=True)
+
+
+def centre_point(rgbd: o3d.geometry.RGBDImage, intrinsic: o3d.camera.PinholeCameraIntrinsic,
+                 T_base_camera: np.ndarray) -> np.ndarray:
+    """Where the camera looks, in base: the centre pixel's point (median depth of a 15 px window)."""
+    depth = np.asarray(rgbd.depth)
+    cx, cy = intrinsic.get_principal_point()
+    u, v = int(round(cx)), int(round(cy))
+    win = depth[v - 7:v + 8, u - 7:u + 8]
+    z = float(np.median(win[win > 0])) if (win > 0).any() else 0.5
+    return (T_base_camera @ np.array([0.0, 0.0, z, 1.0]))[:3]
+
+
+# ------------------------------------------------------------------------------------ per view
+
+
+def fragment(view: Path) -> tuple[o3d.geometry.PointCloud, np.ndarray]:
+    """The view's scans in one cloud in base (RGB-D odometry to scan 0 from the arm's relative pose), and the
+    point scan 0 looks at."""
+    scans = [read_scan(d) for d in sorted(view.glob("scan_*")) if (d / "meta.json").is_file()]
+    rgbd0, intrinsic, T0, _ = scans[0]
+    gray0 = _gray(rgbd0)
+    option = o3d.pipelines.odometry.OdometryOption()
+    jacobian = o3d.pipelines.odometry.RGBDOdometryJacobianFromHybridTerm()
+    cloud = o3d.geometry.PointCloud()
+    for k, (rgbd, _, T, _) in enumerate(scans):
+        T_c0_ck = np.eye(4)
+        if k > 0:
+            prior = np.linalg.inv(T0) @ T
+            ok, T_odo, _ = o3d.pipelines.odometry.compute_rgbd_odometry(_gray(rgbd), gray0, intrinsic, prior,
+                                                                         jacobian, option)
+            T_c0_ck = np.asarray(T_odo) if ok else prior
+        cloud += o3d.geometry.PointCloud.create_from_rgbd_image(rgbd, intrinsic).transform(T0 @ T_c0_ck)
+    return cloud, centre_point(rgbd0, intrinsic, T0)
+
+
+def isolate(cloud: o3d.geometry.PointCloud, look_at: np.ndarray) -> tuple[o3d.geometry.PointCloud, np.ndarray]:
+    """The object of one view fragment: crop, down-sample, table plane out, largest cluster (and the plane's
+    upward normal)."""
+    lo = np.array([look_at[0] - CROP_HALF_WIDTH, look_at[1] - CROP_HALF_WIDTH, -CROP_BELOW])
+    hi = np.array([look_at[0] + CROP_HALF_WIDTH, look_at[1] + CROP_HALF_WIDTH, CROP_ABOVE])
+    down = cloud.crop(o3d.geometry.AxisAlignedBoundingBox(lo, hi)).voxel_down_sample(VOXEL)
+    plane, inliers = down.segment_plane(distance_threshold=PLANE_DISTANCE, ransac_n=3,
+                                        num_iterations=PLANE_ITERATIONS)
+    normal = np.asarray(plane[:3], dtype=float)
+    normal = normal if normal[2] >= 0 else -normal
+    objects = down.select_by_index(inliers, invert=True)
+    labels = np.asarray(objects.cluster_dbscan(eps=DBSCAN_EPS, min_points=DBSCAN_MIN_POINTS))
+    if labels.size and labels.max() >= 0:
+        largest = np.bincount(labels[labels >= 0]).argmax()
+        objects = objects.select_by_index(np.flatnonzero(labels == largest))
+    return objects, normal / np.linalg.norm(normal)
+
+
+def view_object(view: Path) -> tuple[o3d.geometry.PointCloud, np.ndarray]:
+    cloud, look_at = fragment(view)
+    return isolate(cloud, look_at)
+
+
+# ------------------------------------------------------------------------------------ multiway registration
 
 
 def _turn_about(axis: np.ndarray, point: np.ndarray, deg: float) -> np.ndarray:
@@ -107,39 +197,38 @@ def multiway(clouds: list[o3d.geometry.PointCloud], priors: list[np.ndarray]) ->
     return [np.asarray(node.pose) for node in graph.nodes]
 
 
-def run_peer(out: Path, session: Path, model: Path) -> dict[str, Any]:
-    """Register and fuse the views of one ``objscan reconstruct`` output; write the model; its figures."""
+def run_peer(session: Path, model: Path, threads: int | None = None) -> dict[str, Any]:
+    """The whole peer on one session folder: per-view objects, multiway registration, fusion into MODEL."""
     t0 = time.perf_counter()
-    report = json.loads((out / REPORT_FILE).read_text())
-    turns = {int(v["index"]): float(v.get("commanded_turn_deg", 0.0))
-             for v in json.loads((session / SESSION_FILE).read_text())["views"]}
-    items = {int(v["index"]): v for v in report.get("views", []) if "error" not in v and v.get("ply")}
-    order = sorted(items)
-    full = [o3d.io.read_point_cloud(str(out / items[k]["ply"])) for k in order]
-    normals = [np.asarray(items[k]["table"]["normal"], float) for k in order]
-    centers = [np.asarray(items[k]["object_center"], float) for k in order]
-    priors = prior_poses(centers, normals, [turns[k] for k in order])
+    views = json.loads((session / "session.json").read_text())["views"]
+    order = sorted(int(v["index"]) for v in views if (session / f"view_{int(v['index']):02d}").is_dir())
+    turns = {int(v["index"]): float(v.get("commanded_turn_deg", 0.0)) for v in views}
+    with ThreadPoolExecutor(max_workers=threads or os.cpu_count() or 1) as pool:
+        isolated = list(pool.map(view_object, [session / f"view_{k:02d}" for k in order]))
+    objects = [obj for obj, _ in isolated]
+    centers = [np.asarray(obj.get_center()) for obj in objects]
+    priors = prior_poses(centers, [n for _, n in isolated], [turns[k] for k in order])
     t1 = time.perf_counter()
-    poses = multiway([_prepare(c) for c in full], priors)
+    poses = multiway([_prepare(c) for c in objects], priors)
     t2 = time.perf_counter()
     fused = o3d.geometry.PointCloud()
-    for cloud, T in zip(full, poses, strict=True):
+    for cloud, T in zip(objects, poses, strict=True):
         fused += o3d.geometry.PointCloud(cloud).transform(T)
     fused = fused.voxel_down_sample(FUSION_VOXEL)
     model.parent.mkdir(parents=True, exist_ok=True)
     o3d.io.write_point_cloud(str(model), fused)
     t3 = time.perf_counter()
     return {"views": order, "pairs": len(order) * (len(order) - 1) // 2, "points": len(fused.points),
-            "load_s": round(t1 - t0, 3), "registration_s": round(t2 - t1, 3), "fusion_s": round(t3 - t2, 3),
+            "views_s": round(t1 - t0, 3), "registration_s": round(t2 - t1, 3), "fusion_s": round(t3 - t2, 3),
             "voxel_m": VOXEL, "poses": [np.round(T, 8).tolist() for T in poses]}
 
 
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
-    if len(args) != 3:
-        print("usage: python -m bench.multiway_peer RECONSTRUCT_OUT SESSION MODEL_PLY", file=sys.stderr)
+    if len(args) != 2:
+        print("usage: python -m bench.multiway_peer SESSION MODEL_PLY", file=sys.stderr)
         return 2
-    print(json.dumps(run_peer(Path(args[0]), Path(args[1]), Path(args[2]))))
+    print(json.dumps(run_peer(Path(args[0]), Path(args[1]))))
     return 0
 
 

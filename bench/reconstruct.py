@@ -20,12 +20,12 @@ object motion: ``oracle_poses``, the sensor-noise floor) are scored by one funct
 aligning to the ground truth, footprint excluded, as ``bench dynamic``); the target is model / oracle
 <= 1.3 (``chamfer_ratio``).
 
-The peer, in the same run on the same output: Open3D's multiway-registration tutorial pipeline
-(``bench/multiway_peer.py``: pairwise point-to-plane ICP coarse to fine, odometry and loop-closure edges, pose
-graph and global optimisation, fusion) on the static stage's isolated view clouds of that run, the views'
-object centres and table normals and the commanded turns, as a subprocess. ``peer_seconds`` is its wall plus
-the static stage's wall that produced its input (it does not isolate the object itself); its model is scored
-by the same function (``peer_chamfer_mm``).
+The peer, in the same run on the same session: an Open3D-tutorial pipeline written from the tutorials alone
+(``bench/multiway_peer.py``, independent of objscan: per view, RGB-D odometry of the scans from the arm's poses,
+a crop about where the arm looks, the table as the RANSAC plane, the largest DBSCAN cluster; then the
+multiway-registration tutorial over the views from the commanded turns, and fusion), from the session's raw
+frames, as a subprocess. ``peer_seconds`` is its wall (imports included, as objscan's), ``peer_cpu_s`` its CPU;
+its model is scored by the same function (``peer_chamfer_mm``).
 
 Targets (``meets_*``): every object within 1.3x the true-pose fusion, median wall <= 15 s and no object over
 20 s (on the idle 2-core machine), the peer's wall / objscan's wall >= 3 for the median object, static <= 1 s
@@ -87,15 +87,15 @@ def run_cli(session: Path, out: Path, gt: str, env: dict[str, str]) -> dict[str,
             "stderr_tail": proc.stderr[-400:] if proc.returncode else ""}
 
 
-def run_peer(session: Path, out: Path, model: Path, env: dict[str, str]) -> dict[str, Any]:
-    """Time the multiway-registration peer (``bench/multiway_peer.py``) as a subprocess on ``out``."""
-    proc, wall, cpu = _timed([sys.executable, "-m", "bench.multiway_peer", str(out), str(session), str(model)], env)
-    row: dict[str, Any] = {"peer_own_seconds": wall, "peer_own_cpu_s": cpu, "peer_returncode": proc.returncode}
+def run_peer(session: Path, model: Path, env: dict[str, str]) -> dict[str, Any]:
+    """Time the Open3D-tutorial peer (``bench/multiway_peer.py``) as a subprocess on the session's raw frames."""
+    proc, wall, cpu = _timed([sys.executable, "-m", "bench.multiway_peer", str(session), str(model)], env)
+    row: dict[str, Any] = {"peer_seconds": wall, "peer_cpu_s": cpu, "peer_returncode": proc.returncode}
     if proc.returncode != 0:
         row["peer_stderr_tail"] = proc.stderr[-400:]
         return row
     figures = json.loads(proc.stdout.strip().splitlines()[-1])
-    row.update({f"peer_{k}": figures[k] for k in ("registration_s", "fusion_s", "pairs")})
+    row.update({f"peer_{k}": figures[k] for k in ("views_s", "registration_s", "fusion_s", "pairs")})
     return row
 
 
@@ -198,6 +198,8 @@ def measure(name: str, tmp: Path, sessions: Path, env: dict[str, str], seed: int
         "static_s": report["summary"].get("total_s"),
         "static_cpu_s": report["summary"].get("cpu_s"),
         "threads": report.get("threads"),
+        # CPU seconds per static step, summed over the views (each view's own thread): where the stage's time went
+        "static_cpu_steps": _summed([v.get("cpu_timings_s", {}) for v in views]),
         "static_max_trans_err_mm": report["summary"].get("max_trans_err_mm"),
         "global_fallbacks": sum(s.get("path") == "global" for s in scans),
         "global_fallback_fraction": sum(s.get("path") == "global" for s in scans) / max(1, len(scans)),
@@ -214,19 +216,26 @@ def measure(name: str, tmp: Path, sessions: Path, env: dict[str, str], seed: int
         "reconstruct_report_s": report.get("seconds_total"),
     })
     peer_model = tmp / f"{name}_peer.ply"
-    row.update(run_peer(session, out, peer_model, env))
+    row.update(run_peer(session, peer_model, env))
     if row["peer_returncode"] == 0:
         row["chamfer_mm"], row["oracle_chamfer_mm"], row["peer_chamfer_mm"] = oracle_chamfer(
             session, out, truth, peer_model)
-        # the peer's whole pipeline: the isolation it reuses (objscan's static stage) plus its own run
-        row["peer_seconds"] = float(row["static_s"] or 0.0) + row["peer_own_seconds"]
-        row["peer_cpu_s"] = float(row["static_cpu_s"] or 0.0) + row["peer_own_cpu_s"]
         row["peer_ratio"] = row["peer_seconds"] / row["seconds"]
+        row["peer_cpu_ratio"] = row["peer_cpu_s"] / row["cpu_s"]
         row["peer_chamfer_ratio"] = row["peer_chamfer_mm"] / row["oracle_chamfer_mm"]
     else:
         row["chamfer_mm"], row["oracle_chamfer_mm"] = oracle_chamfer(session, out, truth)
     row["chamfer_ratio"] = row["over_oracle"] = row["chamfer_mm"] / row["oracle_chamfer_mm"]
     return row
+
+
+def _summed(parts: list[dict[str, float]]) -> dict[str, float]:
+    """Per-key sums of ``parts`` (rounded), keys in first-seen order."""
+    out: dict[str, float] = {}
+    for part in parts:
+        for k, v in part.items():
+            out[k] = out.get(k, 0.0) + float(v)
+    return {k: round(v, 3) for k, v in out.items()}
 
 
 def _median(rows: list[dict[str, Any]], key: str) -> float | None:
@@ -248,6 +257,7 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "median_cpu_s": _median(rows, "cpu_s"),
         "median_peer_seconds": _median(rows, "peer_seconds"),
         "median_peer_ratio": peer_ratio,
+        "median_peer_cpu_ratio": _median(rows, "peer_cpu_ratio"),
         "median_static_s_per_view": _median(ok, "static_s_per_view"),
         "global_fallback_fraction": round(fallback, 3),
         "median_over_oracle": _median(ok, "over_oracle"),
@@ -292,7 +302,7 @@ def report_figures(rows: list[dict[str, Any]], object_set: str, env: dict[str, s
         "profile": PROFILE if sets == ["realistic"] else {"harsh": "harsh", "realistic": PROFILE},
         "object_names": [r["object"] for r in rows],
         "command": "objscan reconstruct SESSION --out DIR --gt MESH (subprocess, default workers); peer: "
-                   "python -m bench.multiway_peer OUT SESSION MODEL (subprocess)",
+                   "python -m bench.multiway_peer SESSION MODEL (subprocess, from the raw frames)",
         **summarize(rows),
         "by_set": {s: summarize([r for r in rows if r["set"] == s]) for s in sets},
         "omp_num_threads": env.get("OMP_NUM_THREADS", "unset"),

@@ -103,35 +103,33 @@ def test_the_summary_checks_every_target_on_every_object():
     assert no_model["accepted"] == 2
 
 
-def test_the_peer_registers_turned_views_from_the_commanded_turns(tmp_path):
-    """The multiway peer on 3 synthetic views 30 degrees apart: its poses land near the true object motion."""
-    import open3d as o3d
-
+def test_the_peer_registers_a_session_from_its_raw_frames_alone(tmp_path):
+    """The tutorial peer on a recorded 3-view session: it isolates each view itself and its view poses land
+    near the true object motion."""
     from bench.multiway_peer import run_peer
-    from bench.synthetic import synthetic_views
     from common.geometry import invert
 
-    scan = synthetic_views("milk", views=3, scans_per_view=1, profile="hand-turned", seed=1, turn_deg=30.0)
-    out, session = tmp_path / "out", tmp_path / "session"
-    (out / "views").mkdir(parents=True)
-    session.mkdir()
-    items = []
-    for v in scan.views:
-        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(v.xyz.astype(float)))
-        o3d.io.write_point_cloud(str(out / "views" / f"view_{v.index:02d}.ply"), pcd)
-        items.append({"index": v.index, "ply": f"views/view_{v.index:02d}.ply",
-                      "object_center": [float(v.center[0]), float(v.center[1]), 0.0],
-                      "table": {"normal": [0.0, 0.0, 1.0]}})
-    (out / "report.json").write_text(json.dumps({"views": items}))
-    (session / "session.json").write_text(json.dumps(
-        {"views": [{"index": v.index, "commanded_turn_deg": v.commanded_turn_deg} for v in scan.views]}))
-    figures = run_peer(out, session, tmp_path / "peer.ply")
+    session = harsh_set.session_for("box", tmp_path, views=3, scans_per_view=2)
+    figures = run_peer(session, tmp_path / "peer.ply", threads=1)
     assert figures["views"] == [0, 1, 2] and figures["pairs"] == 3
-    assert (tmp_path / "peer.ply").is_file()
-    for v, T in zip(scan.views, figures["poses"], strict=True):
-        err = invert(v.T_view0_view_true) @ np.asarray(T)
+    assert (tmp_path / "peer.ply").is_file() and figures["points"] > 1000
+    truth = [np.asarray(v["ground_truth"]["T_base_object"])
+             for v in json.loads((session / "session.json").read_text())["views"]]
+    centre = truth[0][:3, 3] + np.array([0.0, 0.0, 0.05])  # inside the box, in view 0's base frame
+    for T_obj, T in zip(truth, figures["poses"], strict=True):
+        err = invert(truth[0] @ invert(T_obj)) @ np.asarray(T)  # the peer's pose against the object's true motion
         angle = np.degrees(np.arccos(np.clip((np.trace(err[:3, :3]) - 1) / 2, -1, 1)))
-        assert angle < 2.0 and np.linalg.norm(err[:3, 3]) < 0.005
+        assert angle < 2.5 and np.linalg.norm(err[:3, :3] @ centre + err[:3, 3] - centre) < 0.008
+
+
+def test_the_peer_is_independent_of_objscan():
+    """The peer imports only Open3D and NumPy: nothing of objscan's pipeline can run inside its time (the
+    ``bench`` package's own start-up only defers Open3D's browser viewer)."""
+    code = ("import runpy, sys; runpy.run_module('bench.multiway_peer', run_name='peer'); "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('services', 'common', 'bench')))")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.strip() == "['bench', 'common', 'common.open3d_import']"
 
 
 def test_the_printed_table_labels_each_object_by_set_and_name():
@@ -170,7 +168,7 @@ def test_bench_reconstruct_writes_every_object_with_the_peer(tmp_path):
                 "peer_chamfer_mm", "accepted", "cpu_s", "global_fallbacks", "configurations_run"):
         assert key in box, key
     assert box["chamfer_ratio"] == pytest.approx(box["chamfer_mm"] / box["oracle_chamfer_mm"], rel=1e-3)
-    assert box["peer_seconds"] > box["peer_own_seconds"] > 0
+    assert box["peer_seconds"] > 0 and box["peer_cpu_s"] > 0 and box["peer_chamfer_mm"] > 0
     for key in ("median_wall_s", "max_wall_s", "median_peer_ratio", "meets_accuracy_target", "meets_wall_target",
                 "meets_max_wall_target", "meets_peer_ratio_target", "per_object", "by_set"):
         assert key in figures, key

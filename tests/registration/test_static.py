@@ -136,6 +136,15 @@ def test_table_plane_and_object_centre(registered):
     assert js["timings_s"]["total"] > 0
 
 
+def test_each_view_accounts_its_cpu_per_step_with_the_odometry_inside_registration(registered):
+    """The view's thread CPU per step: the odometry is part of ``register``, the steps add up to the total."""
+    cpu = registered[-1].to_json()["cpu_timings_s"]
+    assert {"backproject", "roi", "preprocess", "register", "odometry", "fuse", "table", "total"} <= set(cpu)
+    assert 0 < cpu["odometry"] <= cpu["register"] + 1e-3
+    steps = sum(v for k, v in cpu.items() if k not in ("odometry", "total"))
+    assert steps <= cpu["total"] + 1e-3 and steps > 0.8 * cpu["total"]
+
+
 def test_object_height_matches_the_mesh():
     frames, _, _ = labelled_view("milk", profile="ideal", seed=0)
     result = register_view(frames)

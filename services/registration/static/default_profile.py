@@ -12,6 +12,7 @@ Optional pose graph with the edges to scan 0 as the spanning tree. See docs/stat
 from __future__ import annotations
 
 from collections.abc import Callable
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -218,13 +219,14 @@ def _object_fitness(src: PriorScan, tgt: PriorScan, T: np.ndarray, cfg: StaticCo
 
 
 def register_pair(src: PriorScan, tgt: PriorScan, prior: np.ndarray, cfg: StaticConfig, seed: int,
-                  up: np.ndarray | None = None) -> PairOutcome:
+                  up: np.ndarray | None = None, sw: Stopwatch | None = None) -> PairOutcome:
     """Local first (RGB-D odometry from the reverse seed, then GICP from the arm's prior), each refined on the
     object when that helps, the window search (``window_search.py``) only when both fail. The check always
     measures the correction against the arm's prior; ``up`` is the table normal in the target camera's frame
     (the search's yaw axis), None when unknown."""
     candidates = []
-    ok, T = _odometry(src, tgt, reverse_seed(src, tgt, prior, cfg), cfg)
+    with sw("odometry") if sw is not None else nullcontext():
+        ok, T = _odometry(src, tgt, reverse_seed(src, tgt, prior, cfg), cfg)
     if ok:
         out = _local(src, tgt, T, prior, "rgbd_odometry", cfg)
         if out.verified:
@@ -326,7 +328,8 @@ def register(
         for j in range(1, len(scans)):
             for i in range(j) if cfg.use_pose_graph else (0,):
                 prior = invert(scans[i].T_believed) @ scans[j].T_believed
-                out = register_pair(data[j], data[i], prior, cfg, cfg.seed + 31 * j + i, up=_up_in(scans[i], cfg))
+                out = register_pair(data[j], data[i], prior, cfg, cfg.seed + 31 * j + i, up=_up_in(scans[i], cfg),
+                                    sw=sw)
                 outcomes[(j, i)] = out
                 if cfg.use_pose_graph:
                     corr = cfg.check_voxel * cfg.check_corr_factor

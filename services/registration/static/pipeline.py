@@ -152,6 +152,7 @@ def register_view(frames: list[RGBDFrame], config: StaticConfig | None = None) -
         object_height=height,
         scans=scan_results,
         timings=sw.total(),
+        cpu_timings=sw.cpu_total(),
         profile=cfg.profile,
         seed_point=seed_base,
         scene_points=len(scene_xyz),
