@@ -285,10 +285,11 @@ def twin_focal(written_scales: tuple[float, ...], out_root: Path = OUT) -> list[
 
     rows = []
     for w in written_scales:
-        seq = out_root / f"twin_fx{w:.2f}"
+        seq, session = out_root / f"twin_fx{w:.2f}", out_root / f"twin_fx{w:.2f}_session"
+        shutil.rmtree(session, ignore_errors=True)  # an import refuses a non-empty folder: an earlier run's
         truth = render_turntable(TurntableSpec(object_name="milk", views=12, step_deg=30.0), seq, w)
         t0 = time.perf_counter()
-        fc = import_sequence(seq, out_root / f"twin_fx{w:.2f}_session")["focal_calibration"]
+        fc = import_sequence(seq, session)["focal_calibration"]
         fx_true = truth["intrinsics"]["fx"]
         rows.append({"written_scale": w, "fx_true": fx_true, "fx_written": fc["fx_before"], "fx_found": fc["fx_after"],
                      "error_pct": round(100.0 * (fc["fx_after"] / fx_true - 1.0), 3), "applied": fc["applied"],

@@ -309,7 +309,8 @@ def solve_turns(n: int, edges: list[Edge], closing: Edge | None, direction: str,
     reasons: list[str] = []
     sol, costs = None, {}
     if closes:
-        sols = {s: solve_graph(n, all_edges, s, cfg, None if step_deg is None else s * abs(step_deg), sig_step)
+        sols = {s: _solve_loop(n, all_edges, s, cfg, None if step_deg is None else s * abs(step_deg), sig_step,
+                               chain, closing)
                 for s in signs}
         costs = {("ccw" if s > 0 else "cw"): round(x.cost, 3) for s, x in sols.items()}
 
@@ -417,6 +418,36 @@ def solve_turns(n: int, edges: list[Edge], closing: Edge | None, direction: str,
         status = "unsure"
     total = float(sum(turns)) + (closing_turn or 0.0)
     return LoopVerdict(status, cum, turns, closes, closing_info, total, unsure, disagree, reasons, edge_rows, costs)
+
+
+def _solve_loop(n: int, edges: list[Edge], winding: int, cfg: TurnGraphConfig, step: float | None,
+                step_sigma: float, chain: list[float], closing: Edge) -> GraphSolution:
+    """The loop solved from two starts, the cheaper kept: even steps, and the estimates themselves.
+
+    Why two: the robust solve keeps the edges its start explains. From even steps a sequence with a gap (frames
+    missing: one step three times the others, its searches finding no turn this way) puts the last view a gap
+    short of the full turn, the closing pairs look wrong and are weighted out, and the full turn reads as a
+    partial one. From the estimates (a turn the other way taken as the median turn, the loop's remainder
+    spread over every turn) the closing pairs fit and the gap takes what the loop leaves it."""
+    even = solve_graph(n, edges, winding, cfg, step, step_sigma)
+    if step is not None or len(chain) != n - 1:
+        return even
+    ahead = [t for t in chain if t * winding > 0]
+    if not ahead:
+        return even
+    turns = [t if t * winding > 0 else float(np.median(ahead)) for t in chain] + [closing.best]
+    turns = np.asarray(turns) + (360.0 * winding - float(np.sum(turns))) / n
+    start = solve_graph(n, edges, winding, cfg, step, step_sigma, init=np.concatenate([[0.0], np.cumsum(turns[:-1])]))
+    # the closing pair is the loop's evidence: a solution that puts it where it was not found is no full turn
+    # (the caller then reads it as a partial one), so one that honours it is preferred, the cheaper of those
+    fits = [x for x in (even, start) if abs(_closing_residual(x, closing)) <= cfg.closing_tolerance_deg]
+    return min(fits or [even, start], key=lambda x: x.cost)
+
+
+def _closing_residual(sol: GraphSolution, closing: Edge) -> float:
+    """How far (deg) the solution puts the closing pair from where its search found it."""
+    q = [k for k, e in enumerate(sol.edges) if e is closing]
+    return sol.residual[q[0]] if q else float("inf")
 
 
 def partial_turn(chain: list[float], closing: Edge, cfg: TurnGraphConfig) -> str:

@@ -37,6 +37,9 @@ class CombineConfig:
     crop_angle_deg: float = 4.0
     consistency_voxel: float = 0.003
     consistency_distance: float = 0.003
+    # a point farther than this from its posed neighbour is outside what the two views share (the overlap), not
+    # misplaced: posed agreement is judged on the points within it
+    overlap_distance: float = 0.010
     # pose graph
     pg_max_correspondence: float = 0.004
     pg_edge_prune_threshold: float = 0.25
@@ -150,17 +153,27 @@ def pairwise_consistency(prep: Prepared, poses: list[np.ndarray], results: list[
     """Fitness and inlier RMSE of every neighbour pair *as posed in the model* (loop edge included).
 
     This is the model's own consistency: two neighbours that the final poses put apart show up here
-    whatever the pair registration claimed.
+    whatever the pair registration claimed. Posed fitness counts every point of the source view, so it also
+    falls where the neighbour does not see that part at all (a box's corner turning past a camera that looks
+    from the side: half of one view's points are on a face the next view does not see). The pair's overlap
+    (share within ``overlap_distance``) and its agreement (share of the overlap within the consistency
+    distance) tell the two apart.
     """
     clouds = [_posed(prep, k, poses[k], cfg.consistency_voxel) for k in range(len(poses))]
     trees = [cKDTree(c.xyz.astype(np.float64)) for c in clouds]
-    fit, rmse = [], []
+    fit, rmse, overlap, agree = [], [], [], []
     for r in results:
         s, t = clouds[r.source_view], trees[r.target_view]
-        d, _ = t.query(s.xyz.astype(np.float64), k=1, distance_upper_bound=cfg.consistency_distance)
-        inl = np.isfinite(d)
+        reach = max(cfg.consistency_distance, cfg.overlap_distance)
+        d, _ = t.query(s.xyz.astype(np.float64), k=1, distance_upper_bound=reach)
+        inl = d < cfg.consistency_distance  # as a query bounded there counts them
+        near = np.isfinite(d)
         fit.append(float(inl.mean()) if len(d) else 0.0)
         rmse.append(1000.0 * float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else float("inf"))
+        overlap.append(float(near.mean()) if len(d) else 0.0)
+        agree.append(float(inl.sum() / near.sum()) if near.any() else 0.0)
     return {"posed_fitness": fit, "posed_rmse_mm": rmse,
             "mean_posed_fitness": float(np.mean(fit)), "min_posed_fitness": float(np.min(fit)),
-            "mean_posed_rmse_mm": float(np.mean(rmse))}
+            "mean_posed_rmse_mm": float(np.mean(rmse)),
+            "posed_overlap": overlap, "posed_agreement": agree,
+            "min_posed_overlap": float(np.min(overlap)), "min_posed_agreement": float(np.min(agree))}

@@ -46,6 +46,16 @@ class AcceptCriteria:
     max_views_left_out: int = 2
     # each turn in the model within this many sigmas of the session's turn accuracy (turns.py)
     turn_sigmas: float = 5.0
+    # Judge each posed neighbour pair on its overlap instead of all its points (None: the session decides,
+    # ``api.session_dynamic_config``: a fixed camera does). A camera looking at the object from the side sees one
+    # or two faces per view, and where a corner turns past, half of a view lies on a face its neighbour never
+    # sees: posed fitness then measures the overlap (0.35-0.6 on correct models), not the alignment. An arm
+    # looking down sees the top in every view, so all its points are compared.
+    judge_overlap: bool | None = None
+    # over the overlap: the share of a pair's shared points within the consistency distance (the same
+    # notion as a view agreeing with the others), and the least overlap that can vouch for a pair at all
+    min_posed_agreement: float = 0.8
+    min_posed_overlap: float = 0.25
 
 
 @dataclass
@@ -126,14 +136,24 @@ def shortfalls(outcome: ConfigurationOutcome, criteria: AcceptCriteria) -> list[
             out.append(f"a kept view fits the others at {min(kept):.3f} < {criteria.min_posed_fitness:g}")
     if outcome.turns is not None:  # whatever else was waived: stacked views fit each other and close the loop
         out.extend(outcome.turns.misses)
-    worst = outcome.consistency["min_posed_fitness"]
-    if not worst >= criteria.min_posed_fitness:
-        fits = outcome.consistency.get("posed_fitness") or []
-        names = outcome.consistency.get("edges") or list(range(len(fits)))  # edge indices when some were left out
+    c = outcome.consistency
+    if criteria.judge_overlap and "posed_agreement" in c:
+        _posed_shortfall(out, c, "posed_agreement", criteria.min_posed_agreement, "posed agreement over the overlap")
+        _posed_shortfall(out, c, "posed_overlap", criteria.min_posed_overlap, "posed overlap")
+    else:
+        _posed_shortfall(out, c, "posed_fitness", criteria.min_posed_fitness, "posed fitness")
+    return out
+
+
+def _posed_shortfall(out: list[str], consistency: dict, key: str, least: float, words: str) -> None:
+    """Append why the worst edge's ``key`` (a per-edge figure of ``pairwise_consistency``) is below ``least``."""
+    fits = consistency.get(key) or []
+    worst = min(fits) if fits else float("nan")
+    if not worst >= least:
+        names = consistency.get("edges") or list(range(len(fits)))  # edge indices when some were left out
         edge = names[int(min(range(len(fits)), key=lambda i: fits[i]))] if fits else None
         where = f" (edge {edge})" if edge is not None else ""
-        out.append(f"posed fitness {worst:.3f}{where} < {criteria.min_posed_fitness:g}")
-    return out
+        out.append(f"{words} {worst:.3f}{where} < {least:g}")
 
 
 def describe(outcome: ConfigurationOutcome) -> str:

@@ -143,11 +143,13 @@ def register_view(frames: list[RGBDFrame], config: StaticConfig | None = None) -
         with sw("object"):
             obj = scene.select_by_index(np.flatnonzero(iso.mask))
             estimate_normals(obj, cfg.output_voxel * 2.5, toward=viewpoint)
-            centre, height = footprint_centre(np.asarray(obj.points), table.plane)
+            # the surface the object stands on: the table, or a turntable's / platform's top above it
+            stands_on = iso.support if iso.support is not None else table.plane
+            centre, height = footprint_centre(np.asarray(obj.points), stands_on)
             cloud = from_o3d(obj, frame="base")
     return StaticViewResult(
         object_cloud=cloud,
-        table=table.plane,
+        table=stands_on,
         object_center=centre,
         object_height=height,
         scans=scan_results,
@@ -159,6 +161,7 @@ def register_view(frames: list[RGBDFrame], config: StaticConfig | None = None) -
         n_clusters=iso.n_clusters,
         figures={
             "table_fraction": round(table.fraction, 4),
+            "support_height_m": None if iso.support is None else round(table.plane.offset - iso.support.offset, 4),
             "selection_distance_m": round(iso.selection_distance, 5),
             "cluster_sizes": iso.cluster_sizes[:8],
         },

@@ -79,9 +79,9 @@ class StaticViewResult:
     """Static registration and isolation of one view (all geometry in ``base``)."""
 
     object_cloud: PointCloud  # xyz float32, rgb uint8, normals float32
-    table: Plane
-    object_center: np.ndarray  # (3,) footprint centre on the table
-    object_height: float  # m above the table
+    table: Plane  # what the object stands on: the table, or a turntable's / platform's top (parallel to it)
+    object_center: np.ndarray  # (3,) footprint centre on the table (or that top)
+    object_height: float  # m above the table (or that top)
     scans: list[ScanResult]
     timings: dict[str, float]
     profile: str
