@@ -48,6 +48,8 @@ from services.orchestrator.cell import Cell
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.incremental import IncrementalModel
 from services.orchestrator.journal import Journal
+from services.orchestrator.lay_down import LAY_DOWN
+from services.orchestrator.lay_down_step import record_laid_down, try_lay_down
 from services.orchestrator.limits import name_limit, name_scan_pose_limit
 from services.orchestrator.motion import ArmMotion, GraspFailed
 from services.orchestrator.planning import (
@@ -500,6 +502,10 @@ class Acquisition:
             out.append("reposition (not executable)")
         if self.j.topple_restarts:
             out.append(f"restart after topple x{self.j.topple_restarts}")
+        if (self.j.laid_down or {}).get("state") == "done":
+            out.append("laid on its side")
+        elif any(d.get("what") == "no lay-down executable" and d.get("view") == k for d in self.j.decisions):
+            out.append("lay down (not executable)")
         return out
 
     def _finish_rescan(self) -> None:
@@ -541,8 +547,9 @@ class Acquisition:
         return State.TURN
 
     def _lying(self, xyz: np.ndarray, height: float) -> bool:
-        """The object toppled during this acquisition and now lies on its side (``recovery.lies_down``)."""
-        return self.j.topple_restarts > 0 and lies_down(xyz, height)
+        """The object toppled or was laid down during this acquisition and now lies on its side
+        (``recovery.lies_down``)."""
+        return (self.j.topple_restarts > 0 or self.j.laid_down is not None) and lies_down(xyz, height)
 
     def _slipped_kinds(self, k: int) -> list[str]:
         """Grasp kinds that slipped at view ``k`` (the re-grasp after a slip tries the others first)."""
@@ -606,6 +613,9 @@ class Acquisition:
                         code=exc.code, message=exc.message[:200])
             return None
         shift = relocation_shift(seq)
+        if seq.direction == LAY_DOWN:  # already journalled at the release (``record_laid_down``)
+            self._plan = None
+            return State.SCAN
         if seq.direction == NO_TURN:  # already journalled at the release (``_record_reposition``)
             self.decide("repositioned: picked and set down without a turn; the view is scanned again there",
                         grasp=gi, pose=seq.name, kind=grasp.kind, to=self.j.centers.get(str(k), [0, 0])[:2],
@@ -750,6 +760,9 @@ class Acquisition:
                                            proactive=False)
             if moved is not None:
                 return moved
+            laid = await try_lay_down(self, k, view, (box_c, box_e), failures)  # too tall to turn standing
+            if laid is not None:
+                return laid
         self._plan = None
         if self.j.grasp_mode != "top_down":
             self.j.grasp_mode = "top_down"
@@ -826,6 +839,9 @@ class Acquisition:
         (a reposition) is recorded by ``_record_reposition`` instead: no view is added."""
         if direction == NO_TURN:
             self._record_reposition(k, shift)
+            return
+        if direction == LAY_DOWN:  # laid on its side: the views restart where it lies
+            record_laid_down(self, k)
             return
         if shift is not None and str(k) in self.j.centers:
             c = np.asarray(self.j.centers[str(k)], float)
