@@ -38,7 +38,7 @@ if TYPE_CHECKING:
 
 def wanted(acq: Acquisition, k: int, view: ViewResult) -> bool:
     """Whether a lay-down is the next strategy at view ``k`` (see the module's "When")."""
-    if acq.j.laid_down is not None or acq._lying(view.cloud.xyz, view.height):
+    if (acq.j.laid_down or {}).get("state") == "done" or acq._lying(view.cloud.xyz, view.height):
         return False
     if int(acq.j.rescans.get(str(k), 0)) < acq.config.max_rescans:
         return False

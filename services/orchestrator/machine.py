@@ -549,7 +549,8 @@ class Acquisition:
     def _lying(self, xyz: np.ndarray, height: float) -> bool:
         """The object toppled or was laid down during this acquisition and now lies on its side
         (``recovery.lies_down``)."""
-        return (self.j.topple_restarts > 0 or self.j.laid_down is not None) and lies_down(xyz, height)
+        laid = (self.j.laid_down or {}).get("state") == "done"
+        return (self.j.topple_restarts > 0 or laid) and lies_down(xyz, height)
 
     def _slipped_kinds(self, k: int) -> list[str]:
         """Grasp kinds that slipped at view ``k`` (the re-grasp after a slip tries the others first)."""

@@ -111,3 +111,24 @@ def test_a_tall_box_that_no_grasp_picks_names_reach_after_trying_to_lay_it_down(
         asyncio.run(_steps(acq, 8))
     assert "lay down (not executable)" in str(err.value)
     assert acq.j.laid_down is None and any(d["what"] == "no lay-down executable" for d in acq.j.decisions)
+
+
+def test_a_lay_down_finished_before_a_restart_is_recorded_not_repeated(tmp_path):
+    from tests.orchestrator.test_reposition import _ReleasedCell
+
+    store = SessionStore(tmp_path)
+    store.save_view(_view(TALL_BOX, WORKSPACE, 0))
+    release = np.eye(4)
+    release[:3, 3] = [0.4, 0.0, 0.15]
+    cell = _ReleasedCell(release)
+    acq = Acquisition(cell, store, AcquisitionConfig(views=12))  # type: ignore[arg-type]
+    acq.j.update(view=0, state="turn", rescans={"0": 2}, centers={"0": WORKSPACE.tolist()},
+                 heights={"0": TALL_BOX[2]},
+                 laid_down={"state": "planned", "pose": "grasp_lay_down@-0.20,+0.00", "center": [0.4, 0.0, 0.0],
+                            "height": 0.066},
+                 turn_intent={"view": 0, "phase": "holding", "direction": LAY_DOWN, "opening": 0.1, "shift": None,
+                              "release_T": release.tolist(), "center": WORKSPACE.tolist(), "height": TALL_BOX[2]})
+    asyncio.run(acq._recover_turn())
+    assert cell.openings == [0.1]  # released where it was set down, never moved again
+    assert acq.view == 0 and acq.state == State.SCAN and acq.j.turn_intent is None
+    assert acq.j.laid_down["state"] == "done" and (tmp_path / "view_00_standing").is_dir()
