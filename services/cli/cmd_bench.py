@@ -33,6 +33,10 @@ def register(sub) -> None:  # noqa: ANN001
                    help="the arm backend, for benchmarks that take one (estop; default: sim)")
     p.add_argument("--emulate-bus", action="store_true",
                    help="dynamixel: the emulated PAPRAS bus (the only bus a benchmark drives)")
+    p.add_argument("--runs", type=int, metavar="N",
+                   help="completion: runs per family (default 4; --quick: 1)")
+    p.add_argument("--seed", type=int, metavar="S",
+                   help="completion: the seed the shapes and the twin's physics are drawn from (default 3)")
     p.set_defaults(func=run)
 
 
@@ -46,9 +50,21 @@ def _arm_options(module, args) -> dict:  # noqa: ANN001
     return wanted
 
 
+def _draw_options(module, args) -> dict:  # noqa: ANN001
+    """``--runs``/``--seed`` for a benchmark whose ``run`` takes them (completion); refused for others."""
+    wanted = {k: v for k in ("runs", "seed") if (v := getattr(args, k, None)) is not None}
+    accepted = inspect.signature(module.run).parameters
+    refused = [k for k in wanted if k not in accepted]
+    if refused:
+        raise BadUsage(f"{args.name} takes no {', '.join('--' + k for k in refused)}")
+    if wanted.get("runs", 1) < 1:
+        raise BadUsage("--runs must be at least 1")
+    return wanted
+
+
 def run(args) -> int:  # noqa: ANN001
     module = importlib.import_module(f"bench.{args.name}")
-    kwargs = {"quick": args.quick, **_arm_options(module, args)}
+    kwargs = {"quick": args.quick, **_arm_options(module, args), **_draw_options(module, args)}
     if getattr(args, "object_set", None):
         if "object_set" not in inspect.signature(module.run).parameters:
             raise BadUsage(f"{args.name} has no object sets (--set is for reconstruct)")

@@ -30,6 +30,7 @@ class Counters:
     topple_restarts: int = 0
     regrasps: int = 0  # regrasp strategies executed (services/orchestrator/regrasp.py)
     repositions: int = 0  # pick-and-places without a turn back to a favoured spot (reposition.py)
+    lay_downs: int = 0  # tall objects laid on their side to be scanned lying (lay_down.py)
 
     def to_dict(self) -> dict[str, int]:
         return dataclasses.asdict(self)
@@ -70,6 +71,7 @@ class Journal:
     limits: dict[str, dict[str, Any]] = field(default_factory=dict)  # view -> planner/dry_run/grasp evidence
     topple_restarts: int = 0
     regrasps: dict[str, list[dict[str, Any]]] = field(default_factory=dict)  # view -> regrasp strategies tried
+    laid_down: dict[str, Any] | None = None  # the object was laid on its side: where, how, from which view
     model_path: str | None = None
     model_ready_s_after_last_view: float | None = None
     accuracy: dict[str, float] | None = None

@@ -52,6 +52,8 @@ from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.ground_truth import evaluate_against_twin, journal_accuracy
 from services.orchestrator.incremental import IncrementalModel
 from services.orchestrator.journal import Journal
+from services.orchestrator.lay_down import LAY_DOWN
+from services.orchestrator.lay_down_step import record_laid_down, try_lay_down
 from services.orchestrator.library_insert import insert_session_model_async
 from services.orchestrator.limits import name_limit, name_scan_pose_limit
 from services.orchestrator.motion import ArmMotion, GraspFailed
@@ -115,11 +117,19 @@ class Acquisition:
             self.j.state = State.SCAN.value
         self._plan: GraspPlanReply | None = None
         self.motion = ArmMotion(cell, self.config.turn, self.decide, self.turns.intent,
-                                lambda seq: self.turns.record_turn(self.view, seq.direction, relocation_shift(seq)))
+                                lambda seq: self._record_release(self.view, seq.direction, relocation_shift(seq)))
         self.incremental = IncrementalModel(store, self.config.dynamic_config, cell,
                                             enabled=self.config.incremental, decide=self.decide)
 
     # -------------------------------------------------------------------------------- bookkeeping
+    def _record_release(self, k: int, direction: int, shift: np.ndarray | None) -> None:
+        """The object is released where a move ends: laid on its side restarts the views where it lies
+        (``record_laid_down``); a turn or a reposition is the turn journal's (``TurnJournal.record_turn``)."""
+        if direction == LAY_DOWN:
+            record_laid_down(self, k)
+        else:
+            self.turns.record_turn(k, direction, shift)
+
     @property
     def state(self) -> State:
         return State(self.j.state)
@@ -417,6 +427,10 @@ class Acquisition:
             out.append("reposition (not executable)")
         if self.j.topple_restarts:
             out.append(f"restart after topple x{self.j.topple_restarts}")
+        if (self.j.laid_down or {}).get("state") == "done":
+            out.append("laid on its side")
+        elif any(d.get("what") == "no lay-down executable" and d.get("view") == k for d in self.j.decisions):
+            out.append("lay down (not executable)")
         return out
 
     async def plan_grasp(self) -> State:
@@ -446,8 +460,10 @@ class Acquisition:
         return State.TURN
 
     def _lying(self, xyz: np.ndarray, height: float) -> bool:
-        """The object toppled during this acquisition and now lies on its side (``recovery.lies_down``)."""
-        return self.j.topple_restarts > 0 and lies_down(xyz, height)
+        """The object toppled or was laid down during this acquisition and now lies on its side
+        (``recovery.lies_down``)."""
+        laid = (self.j.laid_down or {}).get("state") == "done"
+        return (self.j.topple_restarts > 0 or laid) and lies_down(xyz, height)
 
     def _slipped_kinds(self, k: int) -> list[str]:
         """Grasp kinds that slipped at view ``k`` (the re-grasp after a slip tries the others first)."""
@@ -511,6 +527,9 @@ class Acquisition:
                         code=exc.code, message=exc.message[:200])
             return None
         shift = relocation_shift(seq)
+        if seq.direction == LAY_DOWN:  # already journalled at the release (``record_laid_down``)
+            self._plan = None
+            return State.SCAN
         if seq.direction == NO_TURN:  # already journalled at the release (``TurnJournal.record_reposition``)
             self.decide("repositioned: picked and set down without a turn; the view is scanned again there",
                         grasp=gi, pose=seq.name, kind=grasp.kind, to=self.j.centers.get(str(k), [0, 0])[:2],
@@ -655,6 +674,9 @@ class Acquisition:
                                            proactive=False)
             if moved is not None:
                 return moved
+            laid = await try_lay_down(self, k, view, (box_c, box_e), failures)  # too tall to turn standing
+            if laid is not None:
+                return laid
         self._plan = None
         if self.j.grasp_mode != "top_down":
             self.j.grasp_mode = "top_down"
@@ -732,7 +754,7 @@ class Acquisition:
         if phase == "holding" and at_release:
             if closed:
                 await self.cell.gripper(opening, self.config.turn.gripper_force)
-            self.turns.record_turn(k, int(intent["direction"]), intent.get("shift"))
+            self._record_release(k, int(intent["direction"]), intent.get("shift"))
             self.decide("turn had finished before the restart: recorded, not repeated" if int(intent["direction"])
                         else "reposition had finished before the restart: recorded, the view is scanned again",
                         view=self.view)

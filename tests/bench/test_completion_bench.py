@@ -57,3 +57,25 @@ def test_every_stop_names_its_limit_and_the_recoveries_tried():
     assert outcome(crash)["limit"] == "unnamed (internal)" and "/tmp/" not in outcome(crash)["message"]
     done = outcome({"status": "done", "accuracy": {"chamfer_mm": 1.2}, "counters": {}})
     assert done["status"] == "done" and done["chamfer_mm"] == 1.2 and "limit" not in done
+
+
+def test_the_cli_passes_runs_and_seed_to_the_completion_bench_and_refuses_them_elsewhere(monkeypatch):
+    import argparse
+    import importlib
+
+    from services.cli import cmd_bench
+    from services.cli.outcome import BadUsage
+
+    parser = argparse.ArgumentParser()
+    cmd_bench.register(parser.add_subparsers())
+    seen: dict = {}
+    completion = importlib.import_module("bench.completion")
+    monkeypatch.setattr(completion, "run", lambda quick=False, runs=None, views=None, seed=3, families=():
+                        seen.update(quick=quick, runs=runs, seed=seed) or {"families": [], "runs": 0})
+    monkeypatch.setattr(cmd_bench, "print_figures", lambda name, figures: None)
+    args = parser.parse_args(["bench", "completion", "--runs", "2", "--seed", "7"])
+    assert args.func(args) == 0 and seen == {"quick": False, "runs": 2, "seed": 7}
+    with pytest.raises(BadUsage, match="--runs must be at least 1"):
+        args.func(parser.parse_args(["bench", "completion", "--runs", "0"]))
+    with pytest.raises(BadUsage, match="takes no --seed"):
+        args.func(parser.parse_args(["bench", "static", "--seed", "1"]))

@@ -1,0 +1,204 @@
+"""Laying a tall object on its side: a pick-and-place that tips it 90 degrees about the grasp line, for an
+object no grasp can turn standing. Geometry here is plain functions over poses, tested without a robot.
+
+Why: a tall box (21-24 cm, 6 cm thick) standing at the workspace centre offers grasps only across its
+thickness; every pick-turn-place of them left the arm's reach (measured in whole MuJoCo acquisitions: 192
+refusals at view 0, at every spot a relocation or a reposition tried) and the run ended "no executable
+grasp; limit: reach". Lying on its side the same object is low and long, and a top-down grasp across it
+turns it like any lying bottle (``recovery.py``). The arm can make that move: grip the standing object
+from the side, lift it, rotate the hand 90 degrees about the grasp line (the pads' contact line, so the
+object swings about the line it is held on, the hand ending above it pointing down) and set it down.
+The PAPRAS wrist cannot point straight down at the object's 0.60 m (``planning.turn_sequences``), but it can
+on the near ring of ``RelocationConfig`` (0.40 m from the base): the object is carried there, lifted, before
+it is tipped (``carry_shifts``: where it stands first, then the ring's spots, shortest carry first).
+
+What follows is a restart of the views where it now lies: the views of the standing object are set aside
+(kept on disk, as after a topple), view 0 is scanned again lying, the journal records the move
+(``laid_down``) and every later plan treats the object as lying (top-down and frontal grasps alike).
+
+Not modelled: the swing of the held object about the grasp line (the grasp closest to the estimated centre
+of mass is tried first, where that torque is least; the twin keeps the in-hand pose during a carry).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from common.geometry import rotation_about_line
+from common.messages import Grasp
+from services.orchestrator.config import RelocationConfig, TurnMotion
+from services.orchestrator.planning import ChainMove, TurnPoses, carry_line
+from services.orchestrator.regrasp import relocation_shifts
+
+#: ``TurnPoses.direction`` of a pick-and-place that lays the object on its side.
+LAY_DOWN = 2
+#: An object at least this many times taller than its thinnest horizontal extent is laid down only when
+#: nothing turns it standing; a squatter one gains little lying and rolls more.
+TALL_RATIO = 1.4
+#: m the held object's lowest point stays above the table while it is tipped.
+TIP_CLEARANCE = 0.02
+#: m above the table the object is released at (it drops that far; the twin and a real arm both stop
+#: on contact if the hidden side reaches lower than estimated).
+RELEASE_GAP = 0.004
+#: The hand turned half a turn about its approach: the same parallel grasp with the pads swapped.
+ROLL_HALF = np.diag([1.0, -1.0, -1.0, 1.0])
+#: Degrees between the waypoints of the tip arc (straight lines between them, like the turn's arc).
+TIP_STEP_DEG = 10.0
+
+
+@dataclass
+class LayDownPoses(TurnPoses):
+    """A pick, lift, carry (``carry``: shift at the lift height), tip (90 degrees about the grasp line
+    ``axis`` through ``pivot`` at the carried lift height), set-down and retreat. ``turned_lifted`` is the
+    tipped hand before it is lowered; ``turned`` the release pose. ``lying_center``, ``lying_height`` and
+    ``lying_corners``: where the object is expected to rest, how tall it is then, its footprint's box."""
+
+    carry: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    axis: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
+    pivot: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    tip_deg: float = 90.0
+    lying_center: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    lying_height: float = 0.0
+    lying_corners: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))  # footprint's lowest, highest
+
+    def straight_moves(self, center: np.ndarray) -> list[ChainMove]:
+        """Down to the pre-grasp, approach, lift, carry, tip (in ``TIP_STEP_DEG`` chords), set down,
+        retreat, up: all straight lines, checked in full before the hand sets off, as every chain is."""
+        moves = [ChainMove("down to pre-grasp", self.pregrasp, "approach", contact=False),
+                 ChainMove("approach", self.grasp, "approach"),
+                 ChainMove("lift", self.lifted, "held")]
+        carried = self.lifted.copy()
+        carried[:3, 3] += self.carry
+        if float(np.linalg.norm(self.carry)) > 1e-6:
+            moves += [ChainMove("carry", w, "held") for w in carry_line(self.lifted, carried)]
+        moves += [ChainMove("lay down", w, "held") for w in tip_arc(carried, self.axis, self.pivot, self.tip_deg)]
+        moves += [ChainMove("set down", self.turned, "held"),
+                  ChainMove("retreat", self.retreat, "released"),
+                  ChainMove("up", self.above_retreat, "released")]
+        return moves
+
+
+def tip_arc(start: np.ndarray, axis: np.ndarray, pivot: np.ndarray, angle_deg: float,
+            step_deg: float = TIP_STEP_DEG) -> list[np.ndarray]:
+    """Waypoints rotating ``start`` by ``angle_deg`` about the line through ``pivot`` along ``axis``; the last
+    is the whole rotation. A held object must follow the arc (a joint motion between the ends swings it)."""
+    n = max(1, int(np.ceil(abs(angle_deg) / step_deg)))
+    return [rotation_about_line(axis, pivot, np.radians(angle_deg * i / n)) @ start for i in range(1, n + 1)]
+
+
+def stands_tall(xyz: np.ndarray, height: float, ratio: float = TALL_RATIO) -> bool:
+    """Whether the standing object is markedly taller than its thinnest horizontal extent (the height it
+    would have lying on that side)."""
+    pts = np.asarray(xyz, float)
+    if len(pts) < 3 or height <= 0:
+        return False
+    xy = pts[:, :2] - pts[:, :2].mean(axis=0)
+    _, vecs = np.linalg.eigh(xy.T @ xy)
+    thin = float(np.ptp(xy @ vecs[:, 0]))
+    return thin > 0 and height >= ratio * thin
+
+
+def whole_object(xyz: np.ndarray, center: np.ndarray) -> np.ndarray:
+    """The cloud of one view and its mirror through the vertical line at ``center``: the wrist camera sees the
+    arm's side of the object; its far side is taken as symmetric, so the far face's reach is estimated."""
+    pts = np.asarray(xyz, float)
+    mirrored = pts.copy()
+    mirrored[:, :2] = 2 * np.asarray(center, float)[:2] - pts[:, :2]
+    return np.vstack([pts, mirrored])
+
+
+def carry_shifts(center: np.ndarray, config: RelocationConfig) -> list[np.ndarray]:
+    """Where the object is tipped: where it stands, then the relocation spots (the near ring, where the
+    wrist points straight down), shortest carry first."""
+    return [np.zeros(3), *relocation_shifts(center, config)]
+
+
+def lay_down_sequences(grasp: Grasp, xyz: np.ndarray, center: np.ndarray, height: float, motion: TurnMotion,
+                       shifts: list[np.ndarray]) -> list[LayDownPoses]:
+    """For each of ``grasp``'s angular offsets with a horizontal grasp line and each carry in ``shifts``, the
+    chain that tips the object 90 degrees about the grasp line so that the hand ends above it (the approach
+    pointing down), then lowers it until its lowest point is ``RELEASE_GAP`` above the table."""
+    poses = {name: p.matrix() for name, p in grasp.poses.items()}
+    pts = whole_object(xyz, center)
+    out: list[LayDownPoses] = []
+    for d in shifts:
+        d = np.asarray(d, float)
+        for name in (n for n in poses if n.startswith("grasp")):
+            suffix = name[len("grasp"):]
+            pre = poses.get("pregrasp" + suffix)
+            if pre is None:
+                continue
+            for flip, tag in ((np.eye(4), ""), (ROLL_HALF, "_rolled")):  # the pads swapped: another wrist branch
+                seq = _tipped(grasp, poses[name] @ flip, pre @ flip, name + tag, pts, d, motion)
+                if seq is not None:
+                    out.append(seq)
+    return out
+
+
+def _tipped(grasp: Grasp, g: np.ndarray, pre: np.ndarray, name: str, pts: np.ndarray, d: np.ndarray,
+            motion: TurnMotion) -> LayDownPoses | None:
+    """One lay-down chain of grasp pose ``g`` carried by ``d``, or None when its grasp line is not horizontal
+    or no tip leaves the hand above the object."""
+    axis = np.asarray(g[:3, 1], float)
+    if abs(axis[2]) > 0.2:  # the tip must turn the object's vertical axis into a horizontal one
+        return None
+    m = np.asarray(grasp.contacts, float).mean(axis=0)  # on the grasp line
+    rel = pts - m
+    radius = float(np.max(np.linalg.norm(rel - np.outer(rel @ axis, axis), axis=1)))
+    lift = max(motion.lift, radius + TIP_CLEARANCE - float(m[2]))
+    best: tuple[float, float] | None = None
+    for sign in (1.0, -1.0):
+        R = rotation_about_line(axis, m, np.radians(90.0 * sign))
+        down = -float((R[:3, :3] @ g[:3, 0])[2])  # the tipped approach pointing down
+        if best is None or down > best[0]:
+            best = (down, sign)
+    assert best is not None
+    if best[0] < 0.7:  # the object would end above the hand
+        return None
+    angle = 90.0 * best[1]
+    R = rotation_about_line(axis, m, np.radians(angle))
+    moved = pts @ R[:3, :3].T + R[:3, 3] + d  # where the object is when tipped on the table, carried by d
+    drop = float(moved[:, 2].min()) - RELEASE_GAP
+    lowered = R @ g
+    lowered[:3, 3] += d - np.array([0.0, 0.0, drop])
+    lifted = g.copy()
+    lifted[2, 3] += lift
+    tipped_lifted = R @ g
+    tipped_lifted[:3, 3] += d + np.array([0.0, 0.0, lift])
+    back = float(np.linalg.norm(pre[:3, 3] - g[:3, 3]))
+    retreat = lowered.copy()
+    retreat[:3, 3] -= back * lowered[:3, 0]
+    rest = moved - np.array([0.0, 0.0, drop + RELEASE_GAP])
+    above = retreat.copy()  # clear of the object as it now lies: the next moves are joint motions
+    above[2, 3] = max(above[2, 3], float(rest[:, 2].max()) + motion.clearance)
+    above_pre = pre.copy()  # clear of the standing object
+    above_pre[2, 3] = max(above_pre[2, 3], float(pts[:, 2].max()) + motion.clearance)
+    lo, hi = rest[:, :2].min(axis=0), rest[:, :2].max(axis=0)
+    tag = "" if float(np.linalg.norm(d)) < 1e-6 else f"@{d[0]:+.2f},{d[1]:+.2f}"
+    return LayDownPoses(name=f"{name}_lay_down{tag}", above_pregrasp=above_pre, pregrasp=pre, grasp=g.copy(),
+                        lifted=lifted, turned_lifted=tipped_lifted, turned=lowered, retreat=retreat,
+                        above_retreat=above, direction=LAY_DOWN, carry=d.copy(), axis=axis.copy(),
+                        pivot=m + d + np.array([0.0, 0.0, lift]), tip_deg=angle,
+                        lying_center=np.array([*(0.5 * (lo + hi)), 0.0]), lying_height=float(rest[:, 2].max()),
+                        lying_corners=np.array([[lo[0], lo[1], 0.0], [hi[0], hi[1], 0.0]]))
+
+
+def grasps_for_lay_down(grasps: list[Grasp], height: float) -> list[int]:
+    """Indices of ``grasps`` in the order to try them for a lay-down: frontal ones first (their hand ends
+    above the object), then the grasps whose line passes nearest the object's mid-height (the least swing
+    about the grasp line while it tips), then the planner's order."""
+    def key(i: int) -> tuple[bool, float, int]:
+        z = float(np.asarray(grasps[i].contacts, float)[:, 2].mean())
+        return (grasps[i].kind != "frontal", round(abs(z - 0.5 * height), 2), i)
+
+    return sorted(range(len(grasps)), key=key)
+
+
+def as_recorded(seq: LayDownPoses) -> dict:
+    """The journal's ``laid_down`` entry for a chain about to be executed: what the record at the release
+    needs (where the object will lie and how tall) and what the report says."""
+    return {"state": "planned", "pose": seq.name, "tip_deg": round(float(seq.tip_deg), 1),
+            "carry": np.round(seq.carry, 4).tolist(), "center": np.round(seq.lying_center, 4).tolist(),
+            "height": round(float(seq.lying_height), 4)}

@@ -1,0 +1,126 @@
+"""The state machine's side of laying a tall object on its side (geometry: ``lay_down.py``): when to try it,
+trying it, and the journal record of it. Functions over an ``Acquisition`` (``machine.py``), kept out of the
+machine so that it only calls in at three points: the last strategy of a turn step, the record at the
+release, and the next state after the release.
+
+When: the view's re-scans are used up (the next failure ends the run), no grasp turned the standing object
+even top-down, and no reposition was executable; the object stands markedly taller than it is thin
+(``lay_down.stands_tall``); it was not laid down before. It replaces a certain stop, never a turn.
+
+After: the standing views are set aside (``view_KK_standing``, kept on disk, never fused with the lying
+ones), the views restart at 0 where the object lies with a fresh re-scan budget, the journal's
+``laid_down`` says where and how, and every later plan treats the object as lying (``Acquisition._lying``).
+"""
+
+from __future__ import annotations
+
+import shutil
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from common.api import ViewResult
+from common.errors import RemoteError
+from common.session_folder import view_dir
+from services.orchestrator.lay_down import (
+    LayDownPoses,
+    as_recorded,
+    carry_shifts,
+    grasps_for_lay_down,
+    lay_down_sequences,
+    stands_tall,
+)
+from services.orchestrator.planning import object_box
+
+if TYPE_CHECKING:
+    from services.orchestrator.machine import Acquisition, State
+
+
+def wanted(acq: Acquisition, k: int, view: ViewResult) -> bool:
+    """Whether a lay-down is the next strategy at view ``k`` (see the module's "When")."""
+    if (acq.j.laid_down or {}).get("state") == "done" or acq._lying(view.cloud.xyz, view.height):
+        return False
+    if int(acq.j.rescans.get(str(k), 0)) < acq.config.max_rescans:
+        return False
+    return stands_tall(view.cloud.xyz, view.height)
+
+
+async def try_lay_down(acq: Acquisition, k: int, view: ViewResult, box: tuple[np.ndarray, np.ndarray],
+                       failures: list[str]) -> State | None:
+    """Lay the standing object of view ``k`` on its side if a chain for it is executable: the next state, or
+    None when none was (or a lay-down is not the next strategy here)."""
+    if not wanted(acq, k, view):
+        return None
+    rc = acq.config.turn.relocation
+    plan = await acq.cell.plan_grasps(view.cloud, view.table, "both")
+    acq.store.save_json(f"view_{k:02d}/grasps_lay_down.json", {
+        "mode": "both", "explanation": plan.explanation, "rejections": plan.rejections,
+        "grasps": [{"kind": g.kind, "rank": g.rank, "width": g.width, "contacts": np.asarray(g.contacts).tolist(),
+                    "metrics": g.metrics} for g in plan.grasps]})
+    order = grasps_for_lay_down(list(plan.grasps), view.height)
+    acq.decide("laying the object on its side: no grasp turns it standing", height=round(view.height, 4),
+               grasps=len(plan.grasps))
+    scannable: dict[tuple, bool] = {}
+    checks = 0
+    for d in carry_shifts(view.center, rc):
+        for gi in order:
+            grasp = plan.grasps[gi]
+            for seq in lay_down_sequences(grasp, view.cloud.xyz, view.center, view.height, acq.config.turn, [d]):
+                if checks >= rc.max_checks:
+                    break
+                if not await acq._scannable_spot(seq.lying_center, seq.lying_height, scannable):
+                    continue
+                checks += 1
+                acq.j.counters.grasp_checks += 1
+                try:
+                    q_start = await acq.motion.check_turn(seq, view.center, float(grasp.width))
+                except RemoteError as exc:
+                    if exc.code in ("estop_latched", "busy"):
+                        raise
+                    failures.append(f"{seq.name}:{exc.code}")
+                    acq._limits(k).setdefault("dry_run", []).append(exc.code)
+                    continue
+                outcome = await _execute(acq, k, gi, seq, q_start, box, failures, plan.grasps[gi])
+                if outcome is not None:
+                    return outcome
+    acq.decide("no lay-down executable", checks=checks)
+    return None
+
+
+async def _execute(acq: Acquisition, k: int, gi: int, seq: LayDownPoses, q_start: np.ndarray,
+                   box: tuple[np.ndarray, np.ndarray], failures: list[str], grasp: Any) -> State | None:
+    acq.j.laid_down = {**as_recorded(seq), "from_view": k}
+    outcome = await acq._attempt(k, gi, grasp, seq, q_start, box, f"{grasp.kind}:{gi}:{seq.name}", failures)
+    if (acq.j.laid_down or {}).get("state") != "done":  # refused before the hold, or it slipped: not laid down
+        acq.j.laid_down = None
+        return outcome
+    c, e = object_box(seq.lying_center, seq.lying_height, seq.lying_corners, acq.config.turn.object_box_margin)
+    await acq.cell.set_object_box(c, e)  # where it now lies, for the moves to the next scan poses
+    return outcome
+
+
+def record_laid_down(acq: Acquisition, k: int) -> None:
+    """The object was released lying: set the standing views 0..``k`` aside, restart the views at 0 where it
+    lies (its expected centre and height from the plan), and say so in the journal."""
+    j = acq.j
+    entry = dict(j.laid_down or {})
+    for v in range(k + 1):
+        src = view_dir(acq.store.path, v)
+        dst = src.with_name(f"{src.name}_standing")
+        if src.exists() and not dst.exists():
+            shutil.move(str(src), str(dst))
+    for table in (j.regrasps, j.limits, j.failed_grasps):  # evidence of the standing pose, kept apart
+        for v in range(k + 1):
+            if str(v) in table:
+                table[f"{v}_standing"] = table.pop(str(v))
+    center = [float(x) for x in entry.get("center", j.centers.get(str(k), [0.0, 0.0, 0.0]))]
+    height = float(entry.get("height", j.heights.get(str(k), 0.1)))
+    j.update(view=0, turns_deg=[0.0], scan_sets={}, rescans={}, grasp_mode="auto", centers={"-1": center},
+             heights={"-1": height}, turn_direction=None, turn_intent=None, holding=False, pending_rescan=None)
+    entry.update(state="done", from_view=k)
+    j.laid_down = entry
+    j.counters.lay_downs += 1
+    j.state = "scan"
+    acq.decide("laid on its side: the views restart where it lies (the standing views are kept aside)",
+               pose=entry.get("pose"), center=center, height=height, from_view=k)
+    acq.store.save_journal(j.to_dict())

@@ -1,0 +1,134 @@
+"""Laying a tall object on its side (services/orchestrator/lay_down.py, lay_down_step.py): a tall box that no grasp
+turns standing at the workspace centre is picked, tipped 90 degrees about its grasp line and set down lying; the
+views restart where it lies and it is turned lying. Real grasp planner, real arm kinematics and controller (no
+Zenoh), as in test_recovery.py."""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+import pytest
+
+from common.api import ViewResult
+from common.messages import PointCloud
+from services.arm.drivers.sim import SimArmDriver
+from services.arm.kinematics import Kinematics
+from services.orchestrator.config import AcquisitionConfig, TurnMotion
+from services.orchestrator.lay_down import LAY_DOWN, lay_down_sequences, stands_tall, whole_object
+from services.orchestrator.machine import Acquisition, AcquisitionFailed, State
+from services.session_store import SessionStore
+from tests.grasp.shapes import box, table_plane
+from tests.orchestrator.test_recovery import PlanningCell, _cams, _steps
+
+TALL_BOX = (0.0658, 0.109, 0.238)  # m: x, y, height; the generated box that never left view 0
+WORKSPACE = np.array([0.60, 0.0, 0.0])
+
+
+@pytest.fixture(scope="module")
+def kin() -> Kinematics:
+    return Kinematics()
+
+
+def _view(size: tuple[float, float, float], center: np.ndarray, k: int) -> ViewResult:
+    xyz, normals = box(size, 8000, xy=center[:2], view_from=_cams(center), noise=0.0005)
+    return ViewResult(view=k, cloud=PointCloud(xyz=xyz.astype(np.float32), normals=normals.astype(np.float32)),
+                      table=table_plane(), center=center.copy(), height=size[2], scan_poses=np.zeros((0, 4, 4)))
+
+
+def test_a_tall_box_is_tall_and_its_lay_down_tips_it_onto_its_side():
+    view = _view(TALL_BOX, WORKSPACE, 0)
+    assert stands_tall(view.cloud.xyz, view.height)
+    assert not stands_tall(_view((0.07, 0.07, 0.08), WORKSPACE, 0).cloud.xyz, 0.08)
+    from common.messages import Grasp, Pose
+
+    g = np.eye(4)  # a frontal grasp at mid-height, approached along the line from the base (geometry only)
+    g[:3, 3] = [0.60 - 0.0329 + 0.02, 0.0, 0.119]
+    pre = g.copy()
+    pre[0, 3] -= 0.08
+    grasp = Grasp(kind="frontal", contacts=np.array([[0.587, 0.0545, 0.119], [0.587, -0.0545, 0.119]]),
+                  width=0.109, poses={"grasp": Pose.from_matrix(g), "pregrasp": Pose.from_matrix(pre)})
+    seqs = lay_down_sequences(grasp, view.cloud.xyz, view.center, view.height, TurnMotion(), [np.zeros(3)])
+    assert [s.name for s in seqs] == ["grasp_lay_down", "grasp_rolled_lay_down"]  # and with the pads swapped
+    pts = whole_object(view.cloud.xyz, view.center)
+    for seq in seqs:
+        assert seq.direction == LAY_DOWN
+        assert seq.turned[:3, 0] @ [0, 0, -1] > 0.99  # the hand ends above it, pointing down
+        assert seq.lying_height == pytest.approx(TALL_BOX[0], abs=0.005)  # its depth along the approach is up now
+        for mv in seq.straight_moves(view.center):  # held from the lift to the set-down: above the table
+            if mv.phase == "held":
+                held = mv.target @ np.linalg.inv(seq.grasp)
+                assert float((pts @ held[:3, :3].T + held[:3, 3])[:, 2].min()) > -1e-6, mv.step
+        rest = seq.turned @ np.linalg.inv(seq.grasp)
+        assert float((pts @ rest[:3, :3].T + rest[:3, 3])[:, 2].min()) == pytest.approx(0.004, abs=1e-6)
+        assert seq.straight_moves(view.center)[-1].target[2, 3] >= seq.lying_height + 0.05  # backs off up
+
+
+def _standing_tall_box(kin, tmp_path, rescans: int):  # noqa: ANN001
+    store = SessionStore(tmp_path)
+    store.save_view(_view(TALL_BOX, WORKSPACE, 0))
+    cell = PlanningCell(np.asarray(SimArmDriver(send=lambda q, o: None).config.initial_q, float), kin)
+    acq = Acquisition(cell, store, AcquisitionConfig(views=12))  # type: ignore[arg-type]
+    acq.j.update(view=0, state="plan_grasp", centers={"-1": WORKSPACE.tolist(), "0": WORKSPACE.tolist()},
+                 heights={"-1": TALL_BOX[2], "0": TALL_BOX[2]}, rescans={"0": rescans})
+    return cell, acq
+
+
+def test_a_lay_down_released_restarts_the_views_lying_and_says_so(tmp_path):
+    """The record at the release: the standing views are set aside (kept), the views restart at 0 where the
+    object lies with a fresh re-scan budget, the journal and the failure summary say it was laid down, and
+    later plans treat it as lying."""
+    store = SessionStore(tmp_path)
+    for k in range(3):
+        store.save_view(_view(TALL_BOX, WORKSPACE, k))
+    acq = Acquisition(object(), store, AcquisitionConfig(views=12))  # type: ignore[arg-type]
+    acq.j.update(view=2, state="turn", turns_deg=[0.0, 30.0, 60.0], turn_direction=1, rescans={"2": 2},
+                 centers={"2": WORKSPACE.tolist()}, heights={"2": TALL_BOX[2]},
+                 regrasps={"2": [{"strategy": "reposition", "restart": 0}]}, limits={"2": {"dry_run": ["unreachable"]}},
+                 laid_down={"state": "planned", "pose": "grasp_lay_down@-0.20,+0.00", "center": [0.4, 0.0, 0.0],
+                            "height": 0.066})
+    acq._record_turn(2, LAY_DOWN)
+    assert acq.view == 0 and acq.j.turns_deg == [0.0] and acq.j.rescans == {} and acq.state == State.SCAN
+    assert all((tmp_path / f"view_0{k}_standing").is_dir() and not store.has_view(k) for k in range(3))
+    assert acq.j.laid_down["state"] == "done" and acq.j.laid_down["from_view"] == 2
+    assert acq.j.counters.lay_downs == 1 and acq.j.centers == {"-1": [0.4, 0.0, 0.0]}
+    assert acq._object_estimate(0)[1] == pytest.approx(0.066)  # the next scan poses: around it lying
+    assert "2" not in acq.j.regrasps and "2_standing" in acq.j.regrasps  # the standing evidence kept apart
+    assert any(d["what"].startswith("laid on its side") for d in acq.j.decisions)
+    assert "laid on its side" in acq._recoveries_tried(0)
+    lying = _view((TALL_BOX[2], TALL_BOX[1], TALL_BOX[0]), np.array([0.4, 0.0, 0.0]), 0)
+    assert acq._lying(lying.cloud.xyz, lying.height)  # planned frontal and top-down alike, top-down first
+
+
+@pytest.mark.slow  # every standing chain is dry-run first (as in a real acquisition): about three minutes, loaded
+def test_a_tall_box_that_no_grasp_picks_names_reach_after_trying_to_lay_it_down(kin, tmp_path):
+    """The generated tall box (6.6 cm thin along the line from the base, 10.9 cm across: wider than the gripper
+    opens) at the workspace centre: every grasp across its 6.6 cm approaches from the side, which the arm does
+    not reach; the lay-down is tried at the view's last chance and is not executable either (its pick is the
+    same), so the run ends naming reach and every strategy tried, the lay-down among them."""
+    _, acq = _standing_tall_box(kin, tmp_path, rescans=2)
+    with pytest.raises(AcquisitionFailed, match="limit: reach") as err:
+        asyncio.run(_steps(acq, 8))
+    assert "lay down (not executable)" in str(err.value)
+    assert acq.j.laid_down is None and any(d["what"] == "no lay-down executable" for d in acq.j.decisions)
+
+
+def test_a_lay_down_finished_before_a_restart_is_recorded_not_repeated(tmp_path):
+    from tests.orchestrator.test_reposition import _ReleasedCell
+
+    store = SessionStore(tmp_path)
+    store.save_view(_view(TALL_BOX, WORKSPACE, 0))
+    release = np.eye(4)
+    release[:3, 3] = [0.4, 0.0, 0.15]
+    cell = _ReleasedCell(release)
+    acq = Acquisition(cell, store, AcquisitionConfig(views=12))  # type: ignore[arg-type]
+    acq.j.update(view=0, state="turn", rescans={"0": 2}, centers={"0": WORKSPACE.tolist()},
+                 heights={"0": TALL_BOX[2]},
+                 laid_down={"state": "planned", "pose": "grasp_lay_down@-0.20,+0.00", "center": [0.4, 0.0, 0.0],
+                            "height": 0.066},
+                 turn_intent={"view": 0, "phase": "holding", "direction": LAY_DOWN, "opening": 0.1, "shift": None,
+                              "release_T": release.tolist(), "center": WORKSPACE.tolist(), "height": TALL_BOX[2]})
+    asyncio.run(acq._recover_turn())
+    assert cell.openings == [0.1]  # released where it was set down, never moved again
+    assert acq.view == 0 and acq.state == State.SCAN and acq.j.turn_intent is None
+    assert acq.j.laid_down["state"] == "done" and (tmp_path / "view_00_standing").is_dir()
