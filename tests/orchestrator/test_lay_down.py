@@ -87,7 +87,7 @@ def test_a_lay_down_released_restarts_the_views_lying_and_says_so(tmp_path):
                  regrasps={"2": [{"strategy": "reposition", "restart": 0}]}, limits={"2": {"dry_run": ["unreachable"]}},
                  laid_down={"state": "planned", "pose": "grasp_lay_down@-0.20,+0.00", "center": [0.4, 0.0, 0.0],
                             "height": 0.066})
-    acq._record_turn(2, LAY_DOWN)
+    acq._record_release(2, LAY_DOWN, None)
     assert acq.view == 0 and acq.j.turns_deg == [0.0] and acq.j.rescans == {} and acq.state == State.SCAN
     assert all((tmp_path / f"view_0{k}_standing").is_dir() and not store.has_view(k) for k in range(3))
     assert acq.j.laid_down["state"] == "done" and acq.j.laid_down["from_view"] == 2
