@@ -33,7 +33,10 @@ from services.orchestrator.lay_down import (
 from services.orchestrator.planning import object_box
 
 if TYPE_CHECKING:
-    from services.orchestrator.machine import Acquisition, State
+    from services.orchestrator.states import State
+
+#: The running acquisition (``machine.Acquisition``), typed loosely: that module imports this one.
+Acquisition = Any
 
 
 def wanted(acq: Acquisition, k: int, view: ViewResult) -> bool:
