@@ -148,7 +148,8 @@ def shortfalls(outcome: ConfigurationOutcome, criteria: AcceptCriteria) -> list[
 def _posed_shortfall(out: list[str], consistency: dict, key: str, least: float, words: str) -> None:
     """Append why the worst edge's ``key`` (a per-edge figure of ``pairwise_consistency``) is below ``least``."""
     fits = consistency.get(key) or []
-    worst = min(fits) if fits else float("nan")
+    # without the per-edge figures (a summary, e.g. a model recorded before they were kept) judge the minimum
+    worst = min(fits) if fits else float(consistency.get(f"min_{key}", float("nan")))
     if not worst >= least:
         names = consistency.get("edges") or list(range(len(fits)))  # edge indices when some were left out
         edge = names[int(min(range(len(fits)), key=lambda i: fits[i]))] if fits else None
