@@ -36,9 +36,9 @@ def _median_ms(fn: Callable[[], Any], n: int) -> float:
 
 
 def _sim_figures(n: int, workdir: Path) -> dict[str, Any]:
+    from bench.scenario import camera_look_at, simulated_views, write_session
     from services.camera.replay import ReplayCamera, ReplayCameraConfig
     from services.camera.sim import SimCamera
-    from services.sim.scenario import camera_look_at, simulated_views, write_session
     from services.sim.world import World
 
     world = World("milk", profile="ideal", seed=0)

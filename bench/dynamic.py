@@ -114,7 +114,7 @@ def _cpu() -> float:
 
 
 def _views(obj: str, profile: str, seed: int):
-    from services.sim.scenario import simulated_views
+    from bench.scenario import simulated_views
 
     frames = simulated_views(obj, views=12, scans_per_view=3, profile=profile, seed=seed)
     t0 = time.perf_counter()
@@ -311,8 +311,8 @@ def _reconstruct_seconds(frames: list, workers: int, cpu: dict | None = None) ->
     import tempfile
     from pathlib import Path
 
+    from bench.scenario import write_session
     from services.registration.api import reconstruct
-    from services.sim.scenario import write_session
 
     with tempfile.TemporaryDirectory(prefix="bench-reconstruct-") as tmp:
         session = write_session(Path(tmp) / "session", frames)

@@ -22,7 +22,7 @@ Figures (JSON keys):
   ``views_with_grasp`` (auto mode: frontal, else top-down) out of 12. ``turn_survey_views_with_grasp``
   sums them (60 = every view of every object).
 
-Clouds: ``services.sim.scenario.simulated_views`` renders one view (3 scan poses) of each HOPE object;
+Clouds: ``bench.scenario.simulated_views`` renders one view (3 scan poses) of each HOPE object;
 the frames are back-projected into ``base``, cropped to the object above the table, merged, normals
 estimated with Open3D, and sampled to 20k points. Without the sim, a HOPE mesh is sampled instead and
 the points visible from the same three camera positions kept (Open3D ``hidden_point_removal``).
@@ -89,9 +89,9 @@ mid-height (the meshes' axes sit 2-3 mm off their bounding-box centres), for ``c
 
 
 def _sim_clouds(names: list[str], seed: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    from bench.scenario import simulated_views
     from services.grasp.circle import fit_circle_2d
     from services.sim.catalogue import load_object
-    from services.sim.scenario import simulated_views
 
     rng = np.random.default_rng(seed)
     out = {}
@@ -160,9 +160,9 @@ def _time(points, normals, cfg, repeats) -> tuple[list[float], list[float], Any]
 
 def _turn_survey(names: list[str], seed: int) -> dict[str, Any]:
     """Grasps found at every 30° turn of each object, as the acquisition sees it (see the module doc)."""
+    from bench.scenario import simulated_views
     from services.grasp.service import GraspService
     from services.registration.api import register_view
-    from services.sim.scenario import simulated_views
     from services.sim.world import default_object_pose
 
     service_cfg = GraspService.planner_config(grasp_depth=0.01)

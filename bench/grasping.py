@@ -83,10 +83,10 @@ def resting_height(obj, T: np.ndarray) -> float:  # noqa: ANN001
 
 def scan_and_plan(world, method: str, seq: int):  # noqa: ANN001, ANN201
     """3 frames around the object as it lies, the static registration's isolated object, the plan."""
+    from bench.scenario import ScanPoses
     from services.grasp import plan_grasps
     from services.grasp.service import GraspService
     from services.registration.api import register_view
-    from services.sim.scenario import ScanPoses
 
     T = world.true_object_pose()
     top = resting_height(world.obj, T)

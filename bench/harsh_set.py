@@ -154,7 +154,7 @@ def write_mesh(name: str, folder: Path) -> Path:
 def session_for(name: str, folder: Path, seed: int = 0, views: int = 12, scans_per_view: int = 3) -> Path:
     """The primitive's harsh session in ``folder`` (``NAME_harsh_session``, its mesh in ``folder/meshes``),
     recorded now unless a complete one is there."""
-    from services.sim.scenario import simulated_views, write_session
+    from bench.scenario import simulated_views, write_session
 
     session = folder / f"{name}_harsh_session"
     if (session / SESSION_FILE).is_file():

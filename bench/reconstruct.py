@@ -134,7 +134,7 @@ def oracle_chamfer(session: Path, out: Path, name: str, peer_model: Path | None 
 
 def session_for(name: str, folder: Path, seed: int = 0) -> Path:
     """The object's realistic 12 x 3 session in ``folder`` (recorded now unless a complete one is there)."""
-    from services.sim.scenario import simulated_views, write_session
+    from bench.scenario import simulated_views, write_session
 
     session = folder / f"{name}_session"
     if (session / SESSION_FILE).is_file():

@@ -59,10 +59,10 @@ def graspnet_frame() -> DepthFigures | None:
 
 def twin_scenes(quick: bool = False) -> list[tuple[np.ndarray, np.ndarray, float]]:
     """Perfect (depth, colour, fx) frames of the twin seen like the real frames."""
+    from bench.scenario import camera_look_at
     from common.messages import d435_intrinsics
     from services.sim.catalogue import hope_names
     from services.sim.render import render
-    from services.sim.scenario import camera_look_at
     from services.sim.world import World
 
     K = d435_intrinsics()

@@ -45,7 +45,7 @@ def _objects() -> list[str]:
 
 
 def _views(name: str, n: int, seed: int, profile: str = PROFILE):
-    from services.sim.scenario import simulated_views
+    from bench.scenario import simulated_views
 
     return simulated_views(name, views=n, scans_per_view=3, profile=profile, seed=seed)
 

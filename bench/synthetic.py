@@ -1,6 +1,6 @@
 """Simulated dynamic-stage input: 12 isolated views of a HOPE object, virtually scanned (tests, benchmarks).
 
-A stand-in for ``services/sim/scenario.py`` + the static stage, so the dynamic pipeline can be tested
+A stand-in for ``bench/scenario.py`` + the static stage, so the dynamic pipeline can be tested
 and benchmarked on its own. It uses the twin's notions: the HOPE object as ``services/sim/catalogue.py``
 loads it (footprint centre at (0.36, 0, 0), z up, its texture sampled as the twin does), the twin's error
 profile for the turns and set-down shifts (``services/sim/profiles.py``: the draws of ``World.turn_object``;

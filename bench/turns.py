@@ -26,8 +26,8 @@ def _pairs(obj: str, turns: tuple[float, ...], scans: int = SCANS):
     paired with view 0, so the pairs are turned by about ``turns`` (the truth from the twin). One sequence
     instead of one per turn, and ``scans`` scans per view, keep the full run to minutes on a loaded
     machine (it did not finish with 2 views x 3 scans per pair)."""
+    from bench.scenario import simulated_views
     from services.registration.api import fit_palette, prerotation, register_view, view_from_static
-    from services.sim.scenario import simulated_views
 
     step = turns[0]
     if any(abs(t / step - round(t / step)) > 1e-9 for t in turns):

@@ -84,7 +84,7 @@ def test_every_row_names_its_path_and_a_failed_acquisition_is_left_out_of_the_ta
 
 @pytest.fixture(scope="module")
 def two_views():
-    from services.sim.scenario import simulated_views
+    from bench.scenario import simulated_views
 
     return simulated_views("milk", views=2, scans_per_view=2, profile="robot-turned", seed=0, intrinsics=None)
 

@@ -14,7 +14,7 @@ from services.camera.replay import ReplayCamera, ReplayCameraConfig
 from services.camera.sim import SimCamera, SimCameraConfig
 
 sensor_model = pytest.importorskip("services.sim.sensor_model")
-scenario = pytest.importorskip("services.sim.scenario")
+scenario = pytest.importorskip("bench.scenario")
 world_mod = pytest.importorskip("services.sim.world")
 
 pytestmark = pytest.mark.timeout(180)

@@ -3,7 +3,7 @@
 Why: what ships is what runs on a cell. A parameter only a test passes (a fault hook), a helper only a benchmark
 calls, or a product module that reaches into the benchmarks' scripted scans is code a user carries, reads and
 cannot use, and it couples the product to its test harness. Tests inject faults by subclassing or patching
-(``tests/library/helpers.CrashingLibrary``); the benchmarks' scripted twin scans (``services/sim/scenario.py``)
+(``tests/library/helpers.CrashingLibrary``); the benchmarks' scripted twin scans (``bench/scenario.py``)
 and emulated devices (``bench/software_d435.py``) are imported by ``bench/`` and the tests, never by a service.
 The benchmark command itself (``objscan bench``, ``services/cli/cmd_bench.py``) is product and may import them.
 """
@@ -21,7 +21,7 @@ PRODUCT = ("common", "services")
 #: The product's benchmark command: it runs ``bench/``, so it may import it.
 BENCH_COMMAND = "services.cli.cmd_bench"
 #: What only the benchmarks and the tests may import.
-BENCH_ONLY = ("bench", "services.sim.scenario")
+BENCH_ONLY = ("bench",)
 #: A docstring or comment saying that code is there for the tests or the benchmarks.
 TEST_ONLY_WORDS = re.compile(
     r"\bfor tests\b|\btests? only\b|\btest-only\b|\bonly (?:for|in) tests\b|\bfor (?:the )?benchmarks?\b"
@@ -89,12 +89,12 @@ def test_the_checkers_see_a_test_hook_and_a_delayed_scenario_import(tmp_path):
     for pkg in ("services", "services/sim", "services/report", "services/cli", "bench"):
         (tmp_path / pkg).mkdir(parents=True, exist_ok=True)
         (tmp_path / pkg / "__init__.py").write_text("")
-    (tmp_path / "services" / "sim" / "scenario.py").write_text("")
-    (tmp_path / "bench" / "dynamic.py").write_text("from services.sim.scenario import x\n")  # bench: allowed
+    (tmp_path / "bench" / "scenario.py").write_text("")
+    (tmp_path / "bench" / "dynamic.py").write_text("from bench.scenario import x\n")  # bench: allowed
     (tmp_path / "services" / "cli" / "cmd_bench.py").write_text("import bench.dynamic\n")  # the command: allowed
     (tmp_path / "services" / "report" / "data.py").write_text(
         '"""Report data (for tests only)."""\n'
-        "def truth(fault_hook=None):\n    from services.sim.scenario import x\n    return x\n")
-    assert bench_imports(tmp_path) == {"services.report.data": ["services.sim.scenario"]}
+        "def truth(fault_hook=None):\n    from bench.scenario import x\n    return x\n")
+    assert bench_imports(tmp_path) == {"services.report.data": ["bench.scenario"]}
     assert words_for_tests(tmp_path) == ['services/report/data.py:1: """Report data (for tests only)."""']
     assert harness_parameters(tmp_path) == ["services.report.data.truth(fault_hook)"]

@@ -181,8 +181,8 @@ def twin_cream_cheese_view_1():
     """View 1 (turned 30°) of the HOPE cream cheese at (0.60, 0), rendered by the twin and registered
     by the static registration, as the acquisition gets it (generated at test time, nothing stored)."""
     shared_data("hope", "cream_cheese")
+    from bench.scenario import simulated_views
     from services.registration.api import register_view
-    from services.sim.scenario import simulated_views
     from services.sim.world import default_object_pose
 
     frames = simulated_views("cream_cheese", views=1, scans_per_view=3, profile="ideal", seed=0,

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.scenario import simulated_views, write_session
 from common.session_folder import atomic_write_json
 from services.grasp.planner import plan_grasps_for_cloud
 from services.registration.api import (
@@ -26,7 +27,6 @@ from services.registration.api import (
     write_ply,
 )
 from services.sim.ground_truth import true_object_points
-from services.sim.scenario import simulated_views, write_session
 
 
 def build_fake_session(directory: Path, object_name: str = "milk", *, views: int = 4, turn_deg: float = 90.0,

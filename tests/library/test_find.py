@@ -42,8 +42,8 @@ def hope_library(tmp_path_factory):
 
 def partial_view(name: str, yaw_deg: float = 100.0, seed: int = 11):
     """One isolated view of ``name`` as an acquisition's static stage gives it (xyz, rgb in base)."""
+    from bench.scenario import simulated_views
     from services.registration.api import register_view
-    from services.sim.scenario import simulated_views
     from services.sim.world import default_object_pose
 
     pose = default_object_pose() @ make_transform(rotation_about_axis([0, 0, 1], np.radians(yaw_deg)),

@@ -15,9 +15,9 @@ from tests.conftest import shared_data
 def _sim_views(obj: str, profile: str, seed: int):
     """Twin frames -> static stage -> dynamic views, with true poses kept for evaluation only."""
     shared_data("hope", obj)
+    from bench.scenario import simulated_views
     from services.registration.dynamic.views import view_from_static
     from services.registration.static.pipeline import register_view
-    from services.sim.scenario import simulated_views
 
     frames = simulated_views(obj, views=12, scans_per_view=3, profile=profile, seed=seed)
     T0 = np.asarray(frames[0][0].meta["T_base_object_true"])

@@ -53,8 +53,8 @@ def test_the_twin_states_its_turn_accuracy_in_session_json(tmp_path):
     import json
 
     from bench.harsh_set import write_mesh
+    from bench.scenario import simulated_views, write_session
     from services.sim.profiles import PROFILES
-    from services.sim.scenario import simulated_views, write_session
 
     mesh = write_mesh("cylinder", tmp_path / "meshes")
     frames = simulated_views(str(mesh), views=1, scans_per_view=1, profile="harsh", seed=0)

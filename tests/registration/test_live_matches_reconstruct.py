@@ -29,8 +29,8 @@ VIEWS, TURN_DEG = 6, 60.0  # a whole revolution in few views: the test's cost is
 def recorded(tmp_path_factory):
     """A recorded session of the twin (realistic error profile), and the object's true surface in ``base``."""
     shared_data("hope", "milk")
+    from bench.scenario import simulated_views, write_session
     from services.sim.catalogue import load_object
-    from services.sim.scenario import simulated_views, write_session
 
     frames = simulated_views("milk", views=VIEWS, scans_per_view=3, profile="realistic", seed=0, turn_deg=TURN_DEG)
     session = write_session(tmp_path_factory.mktemp("recorded") / "session", frames)

@@ -13,7 +13,7 @@ from common.session_folder import SessionFolderError, scan_dir
 from services.registration.cloud import read_ply
 from services.registration.reconstruct import reconstruct
 
-scenario = pytest.importorskip("services.sim.scenario", reason="the digital twin (services/sim) is not available")
+scenario = pytest.importorskip("bench.scenario", reason="the digital twin (services/sim) is not available")
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-scenario = pytest.importorskip("services.sim.scenario", reason="the digital twin (services/sim) is not available")
+scenario = pytest.importorskip("bench.scenario", reason="the digital twin (services/sim) is not available")
 
 RUNS = int(os.environ.get("OBJSCAN_DETERMINISM_RUNS", "10"))
 

@@ -12,7 +12,7 @@ import pytest
 
 from services.cli.main import main
 
-scenario = pytest.importorskip("services.sim.scenario", reason="the digital twin (services/sim) is not available")
+scenario = pytest.importorskip("bench.scenario", reason="the digital twin (services/sim) is not available")
 
 
 @pytest.fixture(scope="module")

@@ -26,9 +26,9 @@ from services.registration.static import (
 from services.registration.static.pose_errors import relative_pose_errors
 
 sim_world = pytest.importorskip("services.sim.world", reason="the digital twin (services/sim) is not available")
+from bench.scenario import ScanPoses  # noqa: E402
 from common.messages import d435_intrinsics  # noqa: E402
 from services.sim.render import RenderScene, TableSpec, render  # noqa: E402
-from services.sim.scenario import ScanPoses  # noqa: E402
 from services.sim.sensor_model import D435Noise  # noqa: E402
 
 LABEL_TABLE, LABEL_OBJECT = 1, 2

@@ -19,9 +19,9 @@ from services.registration.static import NoTableError, StaticConfig, register_vi
 from services.registration.static.table import segment_table
 
 sim_world = pytest.importorskip("services.sim.world", reason="the digital twin (services/sim) is not available")
+from bench.scenario import ScanPoses  # noqa: E402
 from common.messages import d435_intrinsics  # noqa: E402
 from services.sim.render import LABEL_OBJECT, SceneBox, wall_behind  # noqa: E402
-from services.sim.scenario import ScanPoses  # noqa: E402
 
 #: a camera looking across the table, 10-18 degrees down: the wall fills the upper half of the image
 LOW = ScanPoses(distances_m=(0.45, 0.42, 0.48), elevations_deg=(14.0, 10.0, 18.0))

@@ -26,7 +26,7 @@ def test_the_thread_count_follows_omp_num_threads_and_defaults_to_one():
 @pytest.fixture(scope="module")
 def cream_cheese_view():
     shared_data("hope", "cream_cheese")
-    from services.sim.scenario import simulated_views
+    from bench.scenario import simulated_views
 
     return simulated_views("cream_cheese", views=1, profile="robot-turned", seed=0)[0]
 

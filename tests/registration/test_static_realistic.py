@@ -15,7 +15,7 @@ from services.registration.static.pose_errors import prior_pose_errors, relative
 
 
 def test_realistic_view_registers_within_1mm():
-    from services.sim.scenario import simulated_views
+    from bench.scenario import simulated_views
 
     frames = simulated_views("orange_juice", views=1, scans_per_view=3, profile="realistic", seed=13)[0]
     prior = prior_pose_errors(frames)
@@ -31,7 +31,7 @@ def test_odometry_that_stalls_from_the_prior_is_reseeded():
     """milk, realistic seed 0, view 0 (``objscan bench reconstruct``'s first view): from the arm's prior
     (6.9 mm / 1.3 deg off) the forward RGB-D odometry of scan 2 onto scan 0 stalled at 5.7 mm and passed its
     check. Seeded by the reverse odometry (scan 0 onto scan 2, half resolution) it converges."""
-    from services.sim.scenario import simulated_views
+    from bench.scenario import simulated_views
 
     frames = simulated_views("milk", views=1, scans_per_view=3, profile="realistic", seed=0)[0]
     assert max(e[0] for e in prior_pose_errors(frames)) > 5.0  # a prior far enough off to stall the odometry
@@ -43,10 +43,10 @@ def test_odometry_that_stalls_from_the_prior_is_reseeded():
 
 
 def _prepared_milk_view():  # noqa: ANN202 - (frames, prepared scans, cfg)
+    from bench.scenario import simulated_views
     from common.geometry import transform_points
     from services.registration.static.default_profile import crop_to_roi, prepare
     from services.registration.static.scans import centre_depth, load_scans
-    from services.sim.scenario import simulated_views
 
     frames = simulated_views("milk", views=1, scans_per_view=3, profile="realistic", seed=0)[0]
     cfg = StaticConfig()

@@ -17,7 +17,7 @@ from common.geometry import make_transform, rotation_about_axis
 from services.registration.static import StaticConfig, register_view
 
 pytest.importorskip("services.sim.world", reason="the digital twin (services/sim) is not available")
-from services.sim.scenario import simulated_views  # noqa: E402
+from bench.scenario import simulated_views  # noqa: E402
 
 BOX = (0.07, 0.07, 0.14)  # m: square footprint, so a quarter turn about the axis maps the box onto itself
 

@@ -23,8 +23,8 @@ def twin_pair():
     """Two twin views (3 scans each, D435 noise, hand-turned errors) of the milk carton ~45 degrees apart,
     no turn known."""
     shared_data("hope", "milk")
+    from bench.scenario import simulated_views
     from services.registration.static import register_view
-    from services.sim.scenario import simulated_views
 
     frames = simulated_views("milk", views=2, scans_per_view=3, profile="hand-turned", seed=4, turn_deg=45.0)
     T0 = np.asarray(frames[0][0].meta["T_base_object_true"])

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from bench.scenario import estimate_object, simulated_views
 from common.geometry import invert
 from common.messages import d435_intrinsics
 from services.sim.catalogue import load_object
 from services.sim.errors import SimInputError
 from services.sim.profiles import get_profile
-from services.sim.scenario import estimate_object, simulated_views
 from services.sim.sensor_model import D435Noise
 from services.sim.world import World
 from tests.sim.meshes import write_box_ply, write_textured_box_obj

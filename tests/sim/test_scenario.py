@@ -10,13 +10,13 @@ import pytest
 from PIL import Image
 from scipy.spatial import cKDTree
 
+from bench.scenario import ScanPoses, camera_look_at, simulated_views, write_session
 from common.geometry import yaw_deg_about
 from common.messages import d435_intrinsics
 from common.session_folder import read_scan, read_session
 from services.sim.catalogue import load_object
 from services.sim.ground_truth import posed_surface, recorded_pose, true_object_points
 from services.sim.render import LABEL_OBJECT
-from services.sim.scenario import ScanPoses, camera_look_at, simulated_views, write_session
 from tests.sim.meshes import write_textured_box_obj
 
 SMALL = d435_intrinsics(320, 240)

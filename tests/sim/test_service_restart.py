@@ -9,13 +9,13 @@ import time
 import numpy as np
 import pytest
 
+from bench.scenario import camera_look_at
 from common import keys
 from common.api import CaptureRequest
 from common.client import live_services, request_sync
 from common.geometry import make_transform
 from common.launcher import ProcessSpec
 from common.messages import Health, JointState, Ok, Request, RGBDFrame, d435_intrinsics
-from services.sim.scenario import camera_look_at
 from services.sim.world import World
 from tests.sim.meshes import write_box_ply
 

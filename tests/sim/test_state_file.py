@@ -11,11 +11,11 @@ import json
 import numpy as np
 import pytest
 
+from bench.scenario import camera_look_at
 from common.geometry import make_transform
 from common.messages import d435_intrinsics
 from services.sim.catalogue import load_object
 from services.sim.errors import SimInputError
-from services.sim.scenario import camera_look_at
 from services.sim.state_file import FILE_FORMAT, StateFile, network_key, resolve_state_path
 from services.sim.world import DEFAULT_OBJECT_XY, SimStateError, World, default_object_pose
 from tests.sim.meshes import write_box_ply
