@@ -95,6 +95,6 @@ def test_the_checkers_see_a_test_hook_and_a_delayed_scenario_import(tmp_path):
     (tmp_path / "services" / "report" / "data.py").write_text(
         '"""Report data (for tests only)."""\n'
         "def truth(fault_hook=None):\n    from bench.scenario import x\n    return x\n")
-    assert bench_imports(tmp_path) == {"services.report.data": ["bench.scenario"]}
+    assert bench_imports(tmp_path) == {"services.report.data": ["bench", "bench.scenario"]}
     assert words_for_tests(tmp_path) == ['services/report/data.py:1: """Report data (for tests only)."""']
     assert harness_parameters(tmp_path) == ["services.report.data.truth(fault_hook)"]

@@ -78,7 +78,8 @@ def test_real_cell_merged():
     assert cam["command"][cam["command"].index("--backend") + 1] == "realsense"
     assert not cam.get("devices")  # USB through the Intel-only folder (test_compose_least_privilege.py)
     assert arm["command"][arm["command"].index("--backend") + 1] == "dynamixel"
-    port = arm["command"][arm["command"].index("--port") + 1]
+    options = [arm["command"][i + 1] for i, flag in enumerate(arm["command"]) if flag == "--option"]
+    port = next(o.split("=", 1)[1] for o in options if o.startswith("port="))
     assert arm["devices"] == [f"{REAL_ENV['OBJSCAN_DYNAMIXEL_DEVICE']}:{port}"]
     # the robot configuration is a mounted file the arm service finds through OBJSCAN_ROBOT_CONFIG
     mount = next(v for v in arm["volumes"] if isinstance(v, dict) and v["target"] == "/config/robot.yaml")
