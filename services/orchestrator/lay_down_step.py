@@ -20,7 +20,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from common.api import ViewResult
-from common.errors import RemoteError
 from common.session_folder import view_dir
 from services.orchestrator.lay_down import (
     LayDownPoses,
@@ -75,13 +74,8 @@ async def try_lay_down(acq: Acquisition, k: int, view: ViewResult, box: tuple[np
                     continue
                 checks += 1
                 acq.j.counters.grasp_checks += 1
-                try:
-                    q_start = await acq.motion.check_turn(seq, view.center, float(grasp.width))
-                except RemoteError as exc:
-                    if exc.code in ("estop_latched", "busy"):
-                        raise
-                    failures.append(f"{seq.name}:{exc.code}")
-                    acq._limits(k).setdefault("dry_run", []).append(exc.code)
+                q_start = await acq._dry_run(k, seq, view.center, float(grasp.width), failures)
+                if q_start is None:
                     continue
                 outcome = await _execute(acq, k, gi, seq, q_start, box, failures, plan.grasps[gi])
                 if outcome is not None:

@@ -122,6 +122,19 @@ class Acquisition:
                                             enabled=self.config.incremental, decide=self.decide)
 
     # -------------------------------------------------------------------------------- bookkeeping
+    async def _dry_run(self, k: int, chain: TurnPoses, center: np.ndarray, width: float,
+                       failures: list[str]) -> np.ndarray | None:
+        """The chain's start configuration if the arm can run it whole, else None with the refusal recorded
+        (in ``failures`` and view ``k``'s limits). An e-stop or a busy arm is not a refusal: it propagates."""
+        try:
+            return await self.motion.check_turn(chain, center, width)
+        except RemoteError as exc:
+            if exc.code in ("estop_latched", "busy"):
+                raise
+            failures.append(f"{chain.name}:{exc.code}")
+            self._limits(k).setdefault("dry_run", []).append(exc.code)
+            return None
+
     def _record_release(self, k: int, direction: int, shift: np.ndarray | None) -> None:
         """The object is released where a move ends: laid on its side restarts the views where it lies
         (``record_laid_down``); a turn or a reposition is the turn journal's (``TurnJournal.record_turn``)."""
@@ -717,13 +730,8 @@ class Acquisition:
                 chain = relocated(without_turn(seq), d)
                 checks += 1
                 self.j.counters.grasp_checks += 1
-                try:
-                    q_start = await self.motion.check_turn(chain, center, float(grasp.width))
-                except RemoteError as exc:
-                    if exc.code in ("estop_latched", "busy"):
-                        raise
-                    failures.append(f"{chain.name}:{exc.code}")
-                    self._limits(k).setdefault("dry_run", []).append(exc.code)
+                q_start = await self._dry_run(k, chain, center, float(grasp.width), failures)
+                if q_start is None:
                     continue
                 outcome = await self._attempt(k, gi, grasp, chain, q_start, box, f"{grasp.kind}:{gi}:{chain.name}",
                                               failures)
