@@ -16,6 +16,9 @@ REACH_CODES = frozenset({"unreachable", "line_unreachable", "line_discontinuous"
                          "joint_limit", "joint_limits", "singular", "tcp_height"})
 #: Arm refusal codes that mean the hand or the held object would hit something.
 COLLISION_CODES = frozenset({"collision"})
+#: Arm answers that are not a refusal of the motion asked for: the arm is e-stopped or still moving. Trying the
+#: next candidate cannot help, so they end any search over alternatives and propagate to the state machine.
+ARM_UNAVAILABLE_CODES = frozenset({"estop_latched", "busy"})
 #: Planner rejections that mean the gripper's stroke (or its pads' length) does not fit the object.
 STROKE_REJECTIONS = frozenset({"too_wide", "too_short_for_frontal"})
 #: Planner rejections that mean every candidate would collide with the table or the object.

@@ -55,7 +55,7 @@ from services.orchestrator.journal import Journal
 from services.orchestrator.lay_down import LAY_DOWN
 from services.orchestrator.lay_down_step import record_laid_down, try_lay_down
 from services.orchestrator.library_insert import insert_session_model_async
-from services.orchestrator.limits import name_limit, name_scan_pose_limit
+from services.orchestrator.limits import ARM_UNAVAILABLE_CODES, name_limit, name_scan_pose_limit
 from services.orchestrator.motion import ArmMotion, GraspFailed
 from services.orchestrator.planning import (
     TurnPoses,
@@ -129,7 +129,7 @@ class Acquisition:
         try:
             return await self.motion.check_turn(chain, center, width)
         except RemoteError as exc:
-            if exc.code in ("estop_latched", "busy"):
+            if exc.code in ARM_UNAVAILABLE_CODES:
                 raise
             failures.append(f"{chain.name}:{exc.code}")
             self._limits(k).setdefault("dry_run", []).append(exc.code)
@@ -572,7 +572,7 @@ class Acquisition:
                 await self.motion.check_turn(nseq, new_center, float(grasp.width))
                 return True
             except RemoteError as exc:
-                if exc.code in ("estop_latched", "busy"):
+                if exc.code in ARM_UNAVAILABLE_CODES:
                     raise
                 if self.motion.step in RELOCATABLE_STEPS:  # its pick reaches: a relocation may finish it
                     for d in relocation_shifts(new_center, self.config.turn.relocation)[:2]:
@@ -580,7 +580,7 @@ class Acquisition:
                             await self.motion.check_turn(relocated(nseq, d), new_center, float(grasp.width))
                             return True
                         except RemoteError as exc2:
-                            if exc2.code in ("estop_latched", "busy"):
+                            if exc2.code in ARM_UNAVAILABLE_CODES:
                                 raise
         return False
 

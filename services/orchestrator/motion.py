@@ -18,6 +18,7 @@ from common.errors import ObjscanError, RemoteError
 from common.messages import Grasp
 from services.orchestrator.cell import Cell
 from services.orchestrator.config import TurnMotion
+from services.orchestrator.limits import ARM_UNAVAILABLE_CODES
 from services.orchestrator.planning import TurnPoses
 from services.orchestrator.regrasp import relocation_shift
 
@@ -87,7 +88,7 @@ class ArmMotion:
                                                   check_opening=held_opening if mv.phase == "held" else None)).q
                     return np.asarray(cand, float)
                 except RemoteError as exc:
-                    if exc.code in ("estop_latched", "busy"):
+                    if exc.code in ARM_UNAVAILABLE_CODES:
                         raise
                     if last is None or last[0] == "to above pre-grasp":  # the farthest a branch got is the news
                         last = (step, exc)
@@ -106,12 +107,12 @@ class ArmMotion:
         try:
             return await self.cell.move("linear", target=target, frame=frame, speed=speed)
         except RemoteError as exc:
-            if exc.code in ("estop_latched", "busy"):
+            if exc.code in ARM_UNAVAILABLE_CODES:
                 raise
         try:
             return await self.cell.move("pose", target=target, frame=frame, speed=speed)
         except RemoteError as exc:
-            if exc.code in ("estop_latched", "busy", "unreachable", "joint_limits"):
+            if exc.code in ARM_UNAVAILABLE_CODES | {"unreachable", "joint_limits"}:
                 raise
             self.decide("transit via home", code=exc.code)
         await self.cell.move("home", speed=speed)
@@ -225,7 +226,7 @@ class ArmMotion:
         try:
             return await self.cell.move("joints", q=q, speed=speed)
         except RemoteError as exc:
-            if exc.code in ("estop_latched", "busy"):
+            if exc.code in ARM_UNAVAILABLE_CODES:
                 raise
             self.decide("transit via home", code=exc.code)
         await self.cell.move("home", speed=speed)

@@ -13,11 +13,8 @@ from typing import Any
 import numpy as np
 
 from common.errors import RemoteError
-from services.orchestrator.limits import name_scan_pose_limit
+from services.orchestrator.limits import ARM_UNAVAILABLE_CODES, name_scan_pose_limit
 from services.orchestrator.planning import scan_pose_candidates
-
-#: refusals that are not about reach: they end the search at once (the arm is stopped or busy)
-NOT_REACH = ("estop_latched", "busy")
 
 
 async def first_reachable_scan_set(cell: Any, scan_config: Any, center: np.ndarray, height: float,
@@ -30,7 +27,7 @@ async def first_reachable_scan_set(cell: Any, scan_config: Any, center: np.ndarr
             for T in candidate:
                 await cell.move("pose", target=T, q=start_q, frame="camera", dry_run=True)
         except RemoteError as exc:
-            if exc.code in NOT_REACH:
+            if exc.code in ARM_UNAVAILABLE_CODES:
                 raise
             reasons.append(exc.code)
             continue
@@ -49,7 +46,7 @@ async def scannable_spot(cell: Any, scan_config: Any, spot: np.ndarray, height: 
         try:
             start_q: np.ndarray | None = np.asarray((await cell.move("home", dry_run=True)).q, float)
         except RemoteError as exc:
-            if exc.code in NOT_REACH:
+            if exc.code in ARM_UNAVAILABLE_CODES:
                 raise
             start_q = None  # the way home is blocked from here: plan from the current posture instead
         candidate, reasons = await first_reachable_scan_set(cell, scan_config, np.asarray(spot, float), height,
