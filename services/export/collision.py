@@ -33,6 +33,7 @@ import numpy as np
 import open3d as o3d
 from scipy.spatial import ConvexHull
 
+from services.export.slabs import slab_parts
 from services.sim.collision_shapes import COACD_PARAMS, have_coacd, hull_vertices
 
 #: Parts may stand out of the surface by this much (m): about the model's own accuracy.
@@ -81,11 +82,9 @@ class CollisionParts:
         pts = self.parts[k]
         hull = ConvexHull(pts)
         tris = hull.simplices.copy()
-        centre = pts.mean(axis=0)
-        for i, (a, b, c) in enumerate(tris):
-            n = np.cross(pts[b] - pts[a], pts[c] - pts[a])
-            if n @ (pts[a] - centre) < 0:
-                tris[i] = (a, c, b)
+        a, b, c = pts[tris[:, 0]], pts[tris[:, 1]], pts[tris[:, 2]]
+        inward = np.einsum("ij,ij->i", np.cross(b - a, c - a), a - pts.mean(axis=0)) < 0
+        tris[inward] = tris[inward][:, [0, 2, 1]]
         return pts, tris
 
 
@@ -175,6 +174,13 @@ def collision_parts(mesh: o3d.geometry.TriangleMesh, tolerance_m: float = TOLERA
     best = CollisionParts(hull, "hull", *deviation_figures(hull, mesh))
     if best.max_deviation_m <= tolerance_m:
         return best
+    slabs = slab_parts(mesh, tolerance_m)
+    if slabs is not None:
+        found = CollisionParts(slabs, "slabs", *deviation_figures(slabs, mesh))
+        if found.max_deviation_m < best.max_deviation_m:
+            best = found
+        if best.max_deviation_m <= tolerance_m:
+            return best
     if not have_coacd():
         best.coacd = "unavailable"
         return best

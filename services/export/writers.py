@@ -7,7 +7,6 @@ wherever it is copied. Files are written to a temporary name and renamed (``comm
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -60,10 +59,8 @@ def write_obj(mesh: TexturedMesh, out: Path, name: str) -> Path:
         if fname.endswith(".mtl"):
             data = data.replace(b"map_Kd material_0.png", f"map_Kd {name}.png".encode())
             _write_bytes(out / f"{name}.mtl", data)
-        elif fname.lower().endswith((".png", ".jpg", ".jpeg")):
-            buf = io.BytesIO()
-            Image.fromarray(mesh.albedo).save(buf, format="PNG")
-            _write_bytes(out / f"{name}.png", buf.getvalue())
+        elif fname.lower().endswith(".png"):
+            _write_bytes(out / f"{name}.png", data)  # trimesh's encoding of the albedo: not encoded twice
     return _write_text(out / f"{name}.obj", text)
 
 
