@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import io
 import json
-import resource
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -53,10 +53,11 @@ COACD_TRIANGLES = 3000
 COACD_EFFORT = {"preprocess_resolution": 20, "mcts_iterations": 15, "resolution": 500}
 #: CPU seconds both CoACD runs may take together. CoACD's CPU time is erratic: at threshold 0.05 it took
 #: 4.6 s on one Poisson mesh of the milk carton and 16.3 s on the next run's (the same surface to within
-#: numerical noise), 2-8 s on the orange-juice carton; the rest of an export is 7-10 s of CPU.
+#: numerical noise), 2-8 s on the orange-juice carton; the rest of an export is about 10-15 s of CPU on
+#: one core, and the runs use the other meanwhile.
 COACD_CPU_BUDGET_S = 20.0
-#: The tighter run is not started with less CPU left than this (it could not finish: 7-14 s on the cartons).
-MIN_RUN_S = 6.0
+#: How the budget is shared between the loose run and the tight one (which needs more: 7-14 s on the cartons).
+RUN_SHARES = (2.0, 3.0)
 #: Samples per part on its hull surface when measuring how far it stands out.
 SAMPLES_PER_PART = 4000
 _WORKER = Path(__file__).with_name("coacd_worker.py")
@@ -88,16 +89,23 @@ class CollisionParts:
         return pts, tris
 
 
+def surface_scene(mesh: o3d.geometry.TriangleMesh) -> o3d.t.geometry.RaycastingScene:
+    """A ray-casting scene of ``mesh`` (signed distances to it), built once per mesh."""
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
+    return scene
+
+
 def deviation_figures(parts: list[np.ndarray], mesh: o3d.geometry.TriangleMesh,
-                      samples_per_part: int = SAMPLES_PER_PART) -> tuple[float, float]:
+                      samples_per_part: int = SAMPLES_PER_PART,
+                      scene: o3d.t.geometry.RaycastingScene | None = None) -> tuple[float, float]:
     """How far (m) the parts' hull surfaces outside the mesh stand from the mesh's surface: (max, p95).
 
     Max: the largest over parts of each part's 99.5th percentile (a maximum robust to sampling). P95: the
     95th percentile over all parts' outside samples, each weighted by its part's area per sample. Faces of
     a part inside the mesh (where two parts meet) are not surface and are not counted.
     """
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
+    scene = surface_scene(mesh) if scene is None else scene
     worst = 0.0
     values, weights = [], []
     for pts in parts:
@@ -171,12 +179,13 @@ def collision_parts(mesh: o3d.geometry.TriangleMesh, tolerance_m: float = TOLERA
     v = np.asarray(mesh.vertices, dtype=np.float64)
     t = np.asarray(mesh.triangles, dtype=np.int32)
     hull = [hull_vertices(v)]
-    best = CollisionParts(hull, "hull", *deviation_figures(hull, mesh))
+    scene = surface_scene(mesh)
+    best = CollisionParts(hull, "hull", *deviation_figures(hull, mesh, scene=scene))
     if best.max_deviation_m <= tolerance_m:
         return best
     slabs = slab_parts(mesh, tolerance_m)
     if slabs is not None:
-        found = CollisionParts(slabs, "slabs", *deviation_figures(slabs, mesh))
+        found = CollisionParts(slabs, "slabs", *deviation_figures(slabs, mesh, scene=scene))
         if found.max_deviation_m < best.max_deviation_m:
             best = found
         if best.max_deviation_m <= tolerance_m:
@@ -186,25 +195,20 @@ def collision_parts(mesh: o3d.geometry.TriangleMesh, tolerance_m: float = TOLERA
         return best
     coarse = mesh.simplify_quadric_decimation(COACD_TRIANGLES) if len(t) > COACD_TRIANGLES else mesh
     cv, ct = np.asarray(coarse.vertices), np.asarray(coarse.triangles)
-    runs: list[str] = []
-    left = cpu_budget_s
-    for threshold in sorted({COACD_THRESHOLDS[1], coacd_threshold(v, tolerance_m)}, reverse=True):
-        if best.max_deviation_m <= tolerance_m or (runs and left < MIN_RUN_S):
-            break
-        params = {**COACD_PARAMS, **COACD_EFFORT, "threshold": threshold, "max_convex_hull": MAX_PARTS}
-        c0 = _children_cpu()
-        parts, status = coacd_in_budget(cv, ct, params, left)
-        left -= _children_cpu() - c0
+    thresholds = sorted({COACD_THRESHOLDS[1], coacd_threshold(v, tolerance_m)}, reverse=True)
+    budgets = [cpu_budget_s * (share / sum(RUN_SHARES[:len(thresholds)])) for share in RUN_SHARES[:len(thresholds)]]
+    # both runs at once: each is a single-threaded child, and the export's other steps run meanwhile
+    with ThreadPoolExecutor(len(thresholds)) as pool:
+        done = list(pool.map(lambda tb: coacd_in_budget(cv, ct, {**COACD_PARAMS, **COACD_EFFORT, "threshold": tb[0],
+                                                                 "max_convex_hull": MAX_PARTS}, tb[1]),
+                             zip(thresholds, budgets, strict=True)))
+    runs = []
+    for threshold, (parts, status) in zip(thresholds, done, strict=True):
         runs.append(f"{threshold:.3f}:{status}")
         if parts is not None:
-            found = CollisionParts(parts, "coacd", *deviation_figures(parts, mesh))
+            found = CollisionParts(parts, "coacd", *deviation_figures(parts, mesh, scene=scene))
             if found.max_deviation_m < best.max_deviation_m:
                 best = found
     best.coacd = ",".join(runs)
     return best
 
-
-def _children_cpu() -> float:
-    """CPU seconds of this process's finished children (each CoACD run is one)."""
-    r = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return r.ru_utime + r.ru_stime
