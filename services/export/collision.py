@@ -2,21 +2,23 @@
 
 Simulators collide meshes through convex hulls. The twin's decomposition (``services/sim/collision_shapes``)
 favours few parts for grasp contacts; an exported asset must also rest and roll like the object, so here the
-parts are checked against the surface: the hull alone when it stays within ``tolerance_m`` of the mesh
-(boxes), else one CoACD run, and the closer of the two is kept, with how far it stands out.
+parts are checked against the surface, cheapest first: the hull alone when it stays within ``tolerance_m`` of
+the mesh (boxes); else horizontal slabs, cut into halves, quarters or sectors where a slab is concave
+(``slabs.py``: a can's rim around its recessed lid, within ~1.8 mm in 1-2 s of CPU, the same parts for the
+same mesh); else, where straight cuts cannot follow the surface (a carton's folded top), CoACD, and the
+closest of all the sets is kept, with how far it stands out.
 
-What drove the parts out of the surface was the part count, not the search: asked for at most 12 parts,
+What drove CoACD's parts out of the surface was the part count, not the search: asked for at most 12 parts,
 CoACD decomposes to its concavity threshold and then merges parts pairwise down to 12, and the merged parts
-spanned a carton's gable and a can's recessed lid (3-10 mm out; CoACD's own concavity rose from 0.05 to
-0.10), and the merging took most of the CPU (22 s on the milk carton). Without the cap and with half the
-tree search, threshold 0.05 kept the cans' parts within about 2 mm in 4-5 s. CoACD's threshold is relative
-to the object's size (its parts stood out about 0.3 x threshold x the bounding box's diagonal on the HOPE
-cans, 0.4 on the cartons: 2 mm on a can, 4.4-4.8 mm on a 19 cm carton), so when the loose run leaves parts
-out by more than the tolerance, a second run at the threshold the size calls for (at least 0.025; 0.030
-on the cartons: 2.8-3.0 mm with 19-29 parts) gets what is left of the CPU budget, and the closer set is
-kept. CoACD runs in a child process under a CPU-time limit (its search cannot be interrupted otherwise,
-and its CPU time varies several-fold between nearly identical meshes): a run out of time leaves the parts
-already made (``parts_coacd`` says which runs ran and how they ended: docs/export.md).
+spanned a carton's gable and a can's recessed lid (3-10 mm out), and the merging took most of the CPU (22 s
+on the milk carton). Without the cap and with half the tree search, threshold 0.05 kept the cans' parts
+within about 2 mm in 4-5 s. CoACD's threshold is relative to the object's size (its parts stood out about
+0.3 x threshold x the bounding box's diagonal on the HOPE cans, 0.4 on the cartons: 2 mm on a can, 4.4-4.8
+mm on a 19 cm carton), so the loose run and one at the threshold the size calls for (at least 0.025; 0.030
+on the cartons: 2.8-3.0 mm) run side by side, each in a child process under its share of a CPU budget (its
+search cannot be interrupted otherwise, and its CPU time varies several-fold between nearly identical
+meshes): a run out of time leaves the other's parts, the slabs' or the hull (``parts_coacd`` says which runs
+ran and how they ended: docs/export.md).
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ import numpy as np
 import open3d as o3d
 from scipy.spatial import ConvexHull
 
-from services.export.slabs import slab_parts
+from services.export.slabs import hull_samples, slab_parts
 from services.sim.collision_shapes import COACD_PARAMS, have_coacd, hull_vertices
 
 #: Parts may stand out of the surface by this much (m): about the model's own accuracy.
@@ -65,7 +67,8 @@ _WORKER = Path(__file__).with_name("coacd_worker.py")
 
 @dataclass
 class CollisionParts:
-    """Convex parts (hull vertices, object frame), how they were made and how far they stand out.
+    """Convex parts (hull vertices, object frame), how they were made (``method``: ``hull``, ``slabs`` or
+    ``coacd``) and how far they stand out.
 
     ``max_deviation_m``: the worst part's 99.5th percentile distance outside the mesh; ``p95_deviation_m``:
     the 95th percentile over the parts' whole surface outside the mesh (weighted by area). ``coacd``: what
@@ -109,16 +112,15 @@ def deviation_figures(parts: list[np.ndarray], mesh: o3d.geometry.TriangleMesh,
     worst = 0.0
     values, weights = [], []
     for pts in parts:
-        hull = ConvexHull(pts)
-        part = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(pts),
-                                         o3d.utility.Vector3iVector(hull.simplices.astype(np.int32)))
-        sample = np.asarray(part.sample_points_uniformly(samples_per_part).points, dtype=np.float32)
-        d = scene.compute_signed_distance(o3d.core.Tensor(sample)).numpy()
+        sample = hull_samples(pts, samples_per_part)
+        if sample is None:
+            continue
+        d = scene.compute_signed_distance(o3d.core.Tensor(sample.astype(np.float32))).numpy()
         outside = d[d > 0]
         if outside.size:
             worst = max(worst, float(np.percentile(outside, 99.5)))
             values.append(outside)
-            weights.append(np.full(outside.size, part.get_surface_area() / samples_per_part))
+            weights.append(np.full(outside.size, ConvexHull(pts).area / samples_per_part))
     if not values:
         return worst, 0.0
     v, w = np.concatenate(values), np.concatenate(weights)
@@ -169,12 +171,12 @@ def coacd_threshold(vertices: np.ndarray, tolerance_m: float) -> float:
 
 def collision_parts(mesh: o3d.geometry.TriangleMesh, tolerance_m: float = TOLERANCE_M,
                     cpu_budget_s: float = COACD_CPU_BUDGET_S) -> CollisionParts:
-    """Parts of ``mesh`` (closed, object frame): the hull within ``tolerance_m``, else the closest of the hull
-    and CoACD's runs (the loose threshold, then the one the object's size calls for), all CoACD runs
-    together limited to ``cpu_budget_s`` of CPU.
+    """Parts of ``mesh`` (closed, object frame): the hull within ``tolerance_m``, else the slabs within it,
+    else the closest of the hull, the slabs and CoACD's two runs side by side (the loose threshold and the
+    one the object's size calls for), sharing ``cpu_budget_s`` of CPU.
 
-    ``coacd`` of the result: ``not_needed``, ``unavailable``, or one entry per run (``"0.050:ok"``,
-    ``"0.025:over_budget"``...) joined by commas.
+    ``coacd`` of the result: ``not_needed`` (the hull or the slabs were close enough), ``unavailable``, or
+    one entry per run (``"0.050:ok"``, ``"0.030:over_budget"``...) joined by commas.
     """
     v = np.asarray(mesh.vertices, dtype=np.float64)
     t = np.asarray(mesh.triangles, dtype=np.int32)

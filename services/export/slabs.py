@@ -34,26 +34,36 @@ class _Checker:
         self.scene = o3d.t.geometry.RaycastingScene()
         self.scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
         self.samples = samples
-        self.rng = np.random.default_rng(0)
 
     def __call__(self, pts: np.ndarray) -> float:
-        try:
-            hull = ConvexHull(pts)
-        except (QhullError, ValueError):
+        sample = hull_samples(pts, self.samples)
+        if sample is None:
             return 0.0  # flat or too few points: no volume to stand out
-        tri = pts[hull.simplices]
-        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-        if area.sum() <= 0:
-            return 0.0
-        pick = self.rng.choice(len(tri), size=self.samples, p=area / area.sum())
-        u, v = self.rng.random((2, self.samples))
-        flip = u + v > 1
-        u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
-        t = tri[pick]
-        sample = t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
         d = self.scene.compute_signed_distance(o3d.core.Tensor(sample.astype(np.float32))).numpy()
         outside = d[d > 0]
         return float(np.percentile(outside, 99.5)) if outside.size else 0.0
+
+
+def hull_samples(pts: np.ndarray, count: int, seed: int = 0) -> np.ndarray | None:
+    """``count`` points spread uniformly over the surface of ``pts``' convex hull (None when it has no volume).
+
+    Seeded: the same part gives the same samples, so how far it stands out is the same figure on every run.
+    """
+    try:
+        hull = ConvexHull(pts)
+    except (QhullError, ValueError):
+        return None
+    tri = pts[hull.simplices]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    if area.sum() <= 0:
+        return None
+    rng = np.random.default_rng(seed)
+    pick = rng.choice(len(tri), size=count, p=area / area.sum())
+    u, v = rng.random((2, count))
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    t = tri[pick]
+    return t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
 
 
 Plane = tuple[np.ndarray, float]  # a vertical half-space n . xy >= c
