@@ -36,11 +36,11 @@ SETTINGS: dict[str, dict[str, Any]] = {
 }
 
 
-def run_one(mesh: o3d.geometry.TriangleMesh, setting: dict[str, Any]) -> dict[str, Any]:
-    """Decompose the decimated copy with ``setting``; parts, CPU seconds and deviation (mm)."""
+def run_one(mesh: o3d.geometry.TriangleMesh, setting: dict[str, Any], triangles: int) -> dict[str, Any]:
+    """Decompose the copy decimated to ``triangles`` with ``setting``; parts, CPU seconds and deviation (mm)."""
     import coacd
 
-    coarse = mesh.simplify_quadric_decimation(COACD_TRIANGLES) if len(mesh.triangles) > COACD_TRIANGLES else mesh
+    coarse = mesh.simplify_quadric_decimation(triangles) if len(mesh.triangles) > triangles else mesh
     params = {**COACD_PARAMS, **COACD_EFFORT, **setting}
     coacd.set_log_level("error")
     c0 = time.process_time()
@@ -56,18 +56,21 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("meshes", nargs="+", type=Path, help="exported closed meshes (NAME.ply, object frame)")
     p.add_argument("--settings", default=",".join(SETTINGS), help="comma-separated names of SETTINGS")
+    p.add_argument("--triangles", type=int, default=COACD_TRIANGLES[0],
+                   help="triangles of the decimated copy CoACD decomposes (the export's loose run: the first of "
+                        "collision.COACD_TRIANGLES; its tight run: the second)")
     p.add_argument("--json", type=Path, required=True, help="the figures, as JSON")
     args = p.parse_args()
     if not have_coacd():
         raise SystemExit("coacd is not installed")
     rows: list[dict[str, Any]] = []
     doc = {"benchmark": "export_parts", "machine": {"cpus": os.cpu_count(), "platform": platform.platform()},
-           "triangles": COACD_TRIANGLES, "effort": COACD_EFFORT, "rows": rows}
+           "triangles": args.triangles, "effort": COACD_EFFORT, "rows": rows}
     for path in args.meshes:
         mesh = o3d.io.read_triangle_mesh(str(path))
         for name in args.settings.split(","):
             row = {"mesh": path.stem, "setting": name, **SETTINGS[name], "load_before": round(os.getloadavg()[0], 1),
-                   **run_one(mesh, SETTINGS[name])}
+                   **run_one(mesh, SETTINGS[name], args.triangles)}
             rows.append(row)
             print(row, flush=True)
             atomic_write_json(args.json, doc)
