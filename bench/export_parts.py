@@ -23,7 +23,7 @@ import numpy as np
 import open3d as o3d
 
 from common.session_folder import atomic_write_json
-from services.export.collision import COACD_EFFORT, COACD_TRIANGLES, deviation_figures
+from services.export.collision import COACD_EFFORT, COACD_RUNS, deviation_figures
 from services.sim.collision_shapes import COACD_PARAMS, have_coacd
 
 SETTINGS: dict[str, dict[str, Any]] = {
@@ -56,9 +56,8 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("meshes", nargs="+", type=Path, help="exported closed meshes (NAME.ply, object frame)")
     p.add_argument("--settings", default=",".join(SETTINGS), help="comma-separated names of SETTINGS")
-    p.add_argument("--triangles", type=int, default=COACD_TRIANGLES[0],
-                   help="triangles of the decimated copy CoACD decomposes (the export's loose run: the first of "
-                        "collision.COACD_TRIANGLES; its tight run: the second)")
+    p.add_argument("--triangles", type=int, default=COACD_RUNS[0][1],
+                   help="triangles of the decimated copy CoACD decomposes (the export's runs: collision.COACD_RUNS)")
     p.add_argument("--json", type=Path, required=True, help="the figures, as JSON")
     args = p.parse_args()
     if not have_coacd():

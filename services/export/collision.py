@@ -49,21 +49,20 @@ COACD_THRESHOLDS = (0.025, 0.05)
 DEVIATION_PER_THRESHOLD = 0.3
 #: No cap on the part count (-1): merging down to a cap was what made parts stand out (module doc).
 MAX_PARTS = -1
-#: CoACD decomposes a copy decimated to about this many triangles (parts are checked against the full mesh),
-#: with a coarser search than the twin's: 15 tree-search iterations instead of 60. The loose run takes the
-#: coarser copy; the tight run a finer one: on the 3,000-triangle copy of the orange-juice carton threshold
-#: 0.030 left parts 6.3 mm out (20 parts, 4.4 s), on the 6,000-triangle copy 2.9 mm (28 parts, 6.2 s; the
-#: milk carton 2.6 mm, 74 parts, 11.5 s). Nearby counts can cost far more (4,500 on the milk carton: past
-#: 27 s): CoACD's time is erratic, which the budget bounds.
-COACD_TRIANGLES = (3000, 6000)
+#: CoACD's runs, side by side: (loose threshold, else the one the object's size calls for; triangles of the
+#: decimated copy it decomposes, parts checked against the full mesh; share of the CPU budget). Its result
+#: on a carton swings with the copy: threshold 0.030 left the orange-juice carton's parts 6.3 mm out on the
+#: 3,000-triangle copy (20 parts, 4.4 s) and 2.9 mm on the 6,000 one (28 parts, 6.2 s), while on the milk
+#: carton the 3,000 copy gave 2.8 mm (85 parts) and the 6,000 copy ran past 14 s. Two copies at the tight
+#: threshold, and the loose run as a cheap floor (4.4-7.5 mm on the cartons, 3-5 s), keep the closest.
+COACD_RUNS = ((True, 3000, 2.0), (False, 3000, 4.0), (False, 6000, 5.0))
+#: A coarser search than the twin's: 15 tree-search iterations instead of 60.
 COACD_EFFORT = {"preprocess_resolution": 20, "mcts_iterations": 15, "resolution": 500}
-#: CPU seconds both CoACD runs may take together. CoACD's CPU time is erratic: at threshold 0.05 it took
-#: 4.6 s on one Poisson mesh of the milk carton and 16.3 s on the next run's (the same surface to within
-#: numerical noise), 2-8 s on the orange-juice carton; the rest of an export is about 10-15 s of CPU on
+#: CPU seconds CoACD's runs may take together (shared as ``COACD_RUNS`` says: 5.1, 10.2 and 12.7 s). CoACD's
+#: CPU time is erratic: at threshold 0.05 it took 4.6 s on one Poisson mesh of the milk carton and 16.3 s on
+#: another run's (the same surface to within numerical noise). The rest of an export is about 10 s of CPU on
 #: one core, and the runs use the other meanwhile.
-COACD_CPU_BUDGET_S = 22.0
-#: How the budget is shared between the loose run and the tight one (which needs more: 6-12 s on the cartons).
-RUN_SHARES = (4.0, 7.0)
+COACD_CPU_BUDGET_S = 28.0
 #: Samples per part on its hull surface when measuring how far it stands out.
 SAMPLES_PER_PART = 4000
 _WORKER = Path(__file__).with_name("coacd_worker.py")
@@ -176,11 +175,12 @@ def coacd_threshold(vertices: np.ndarray, tolerance_m: float) -> float:
 def collision_parts(mesh: o3d.geometry.TriangleMesh, tolerance_m: float = TOLERANCE_M,
                     cpu_budget_s: float = COACD_CPU_BUDGET_S) -> CollisionParts:
     """Parts of ``mesh`` (closed, object frame): the hull within ``tolerance_m``, else the slabs within it,
-    else the closest of the hull, the slabs and CoACD's two runs side by side (the loose threshold and the
-    one the object's size calls for), sharing ``cpu_budget_s`` of CPU.
+    else the closest of the hull, the slabs and CoACD's runs side by side (``COACD_RUNS``: the loose threshold
+    and the one the object's size calls for, on two copies), sharing ``cpu_budget_s`` of CPU.
 
     ``coacd`` of the result: ``not_needed`` (the hull or the slabs were close enough), ``unavailable``, or
-    one entry per run (``"0.050:ok"``, ``"0.030:over_budget"``...) joined by commas.
+    one ``THRESHOLD@TRIANGLES:STATUS`` per run (``"0.050@3000:ok"``, ``"0.030@6000:over_budget"``...) joined
+    by commas.
     """
     v = np.asarray(mesh.vertices, dtype=np.float64)
     t = np.asarray(mesh.triangles, dtype=np.int32)
@@ -199,21 +199,25 @@ def collision_parts(mesh: o3d.geometry.TriangleMesh, tolerance_m: float = TOLERA
     if not have_coacd():
         best.coacd = "unavailable"
         return best
-    thresholds = sorted({COACD_THRESHOLDS[1], coacd_threshold(v, tolerance_m)}, reverse=True)
-    shares = RUN_SHARES[:len(thresholds)]
-    budgets = [cpu_budget_s * share / sum(shares) for share in shares]
-    copies = [mesh.simplify_quadric_decimation(n) if len(t) > n else mesh for n in COACD_TRIANGLES[:len(thresholds)]]
+    size_threshold = coacd_threshold(v, tolerance_m)
+    plan: dict[tuple[float, int], float] = {}  # (threshold, triangles of the copy) -> share of the budget
+    for loose, n, share in COACD_RUNS:
+        plan.setdefault((COACD_THRESHOLDS[1] if loose else size_threshold, min(n, len(t))), share)
+    keys = list(plan)
+    copies = {n: mesh.simplify_quadric_decimation(n) if n < len(t) else mesh for _, n in keys}
 
     def run(k: int) -> tuple[list[np.ndarray] | None, str]:
-        params = {**COACD_PARAMS, **COACD_EFFORT, "threshold": thresholds[k], "max_convex_hull": MAX_PARTS}
-        return coacd_in_budget(np.asarray(copies[k].vertices), np.asarray(copies[k].triangles), params, budgets[k])
+        threshold, n = keys[k]
+        params = {**COACD_PARAMS, **COACD_EFFORT, "threshold": threshold, "max_convex_hull": MAX_PARTS}
+        budget = cpu_budget_s * plan[keys[k]] / sum(plan.values())
+        return coacd_in_budget(np.asarray(copies[n].vertices), np.asarray(copies[n].triangles), params, budget)
 
-    # both runs at once: each is a single-threaded child, and the export's other steps run meanwhile
-    with ThreadPoolExecutor(len(thresholds)) as pool:
-        done = list(pool.map(run, range(len(thresholds))))
+    # the runs at once: each is a single-threaded child, and the export's other steps run meanwhile
+    with ThreadPoolExecutor(len(keys)) as pool:
+        done = list(pool.map(run, range(len(keys))))
     runs = []
-    for threshold, (parts, status) in zip(thresholds, done, strict=True):
-        runs.append(f"{threshold:.3f}:{status}")
+    for (threshold, n), (parts, status) in zip(keys, done, strict=True):
+        runs.append(f"{threshold:.3f}@{n}:{status}")
         if parts is not None:
             found = CollisionParts(parts, "coacd", *deviation_figures(parts, mesh, scene=scene))
             if found.max_deviation_m < best.max_deviation_m:
