@@ -32,8 +32,8 @@ from services.export.texture import bake_texture, vertex_coloured
 from services.export.writers import FORMATS, write_asset, write_meshes
 
 #: The surface method used when none is asked for. Both met the Chamfer targets on the five HOPE sessions with
-#: means a tie (Poisson 0.847 mm, TSDF 0.818 mm); Poisson on the point model has the better worst object
-#: (1.06 vs 1.08 mm) and the better worst mesh/points ratio (0.83 vs 0.86) (docs/export.md).
+#: means a tie (Poisson 0.837 mm, TSDF 0.820 mm); Poisson on the point model has the better worst object
+#: (1.04 vs 1.08 mm) and the better worst mesh/points ratio (0.80 vs 0.87) (docs/export.md).
 DEFAULT_METHOD = "poisson"
 OBJECT_FRAME_FILE = "object_frame.json"
 #: The closed mesh beside ``model.ply``, in the same frame: the model library stores it with the entry.
