@@ -2,8 +2,9 @@
 
 The objects an export sees stand on the table and are mostly prisms along the vertical: a carton's body and
 gable top, a can's body and the rim around its recessed lid. Cut into horizontal slabs, each slab's hull is
-close to the surface except where a slab's cross-section is concave (a can's rim is a ring around the lid's
-pocket), and there the slab is cut into sectors around its centre, whose hulls span only the ring's chord.
+close to the surface except where a slab's cross-section is concave, and there the slab is cut: into halves
+or quarters (notches on its centre lines), a grid, or sectors around its centre (a can's rim is a ring around
+the lid's pocket: each sector's hull spans only a short chord of it).
 Every part is measured against the mesh while it is built (its hull's surface outside the mesh), so the
 result is checked, not hoped for; it costs a second or two of CPU and is the same for the same mesh, where
 CoACD's tree search took 3-16 s on nearly identical carton meshes and left parts 2.8 mm out on one, 8 mm on
@@ -18,8 +19,6 @@ from scipy.spatial import ConvexHull, QhullError
 
 #: The finest slab (m): about the surface's own cell (Poisson ~1.6 mm), finer slabs hold no new vertices.
 STEP_M = 0.002
-#: Sector counts tried, in order, for a slab whose hull stands out (a ring's chord over its pocket).
-SECTORS = (8, 16, 32)
 #: Parts are built to stand out at most this fraction of the tolerance: the check samples a hull's surface more
 #: sparsely than the final measure (``collision.deviation_figures``), whose 99.5th percentile comes out higher.
 MARGIN = 0.9
