@@ -23,7 +23,7 @@ import numpy as np
 import open3d as o3d
 
 from common.session_folder import atomic_write_json
-from services.export.collision import COACD_EFFORT, COACD_TRIANGLES, deviation_figures
+from services.export.collision import COACD_EFFORT, COACD_RUNS, deviation_figures
 from services.sim.collision_shapes import COACD_PARAMS, have_coacd
 
 SETTINGS: dict[str, dict[str, Any]] = {
@@ -36,11 +36,11 @@ SETTINGS: dict[str, dict[str, Any]] = {
 }
 
 
-def run_one(mesh: o3d.geometry.TriangleMesh, setting: dict[str, Any]) -> dict[str, Any]:
-    """Decompose the decimated copy with ``setting``; parts, CPU seconds and deviation (mm)."""
+def run_one(mesh: o3d.geometry.TriangleMesh, setting: dict[str, Any], triangles: int) -> dict[str, Any]:
+    """Decompose the copy decimated to ``triangles`` with ``setting``; parts, CPU seconds and deviation (mm)."""
     import coacd
 
-    coarse = mesh.simplify_quadric_decimation(COACD_TRIANGLES) if len(mesh.triangles) > COACD_TRIANGLES else mesh
+    coarse = mesh.simplify_quadric_decimation(triangles) if len(mesh.triangles) > triangles else mesh
     params = {**COACD_PARAMS, **COACD_EFFORT, **setting}
     coacd.set_log_level("error")
     c0 = time.process_time()
@@ -56,18 +56,20 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("meshes", nargs="+", type=Path, help="exported closed meshes (NAME.ply, object frame)")
     p.add_argument("--settings", default=",".join(SETTINGS), help="comma-separated names of SETTINGS")
+    p.add_argument("--triangles", type=int, default=COACD_RUNS[0][1],
+                   help="triangles of the decimated copy CoACD decomposes (the export's runs: collision.COACD_RUNS)")
     p.add_argument("--json", type=Path, required=True, help="the figures, as JSON")
     args = p.parse_args()
     if not have_coacd():
         raise SystemExit("coacd is not installed")
     rows: list[dict[str, Any]] = []
     doc = {"benchmark": "export_parts", "machine": {"cpus": os.cpu_count(), "platform": platform.platform()},
-           "triangles": COACD_TRIANGLES, "effort": COACD_EFFORT, "rows": rows}
+           "triangles": args.triangles, "effort": COACD_EFFORT, "rows": rows}
     for path in args.meshes:
         mesh = o3d.io.read_triangle_mesh(str(path))
         for name in args.settings.split(","):
             row = {"mesh": path.stem, "setting": name, **SETTINGS[name], "load_before": round(os.getloadavg()[0], 1),
-                   **run_one(mesh, SETTINGS[name])}
+                   **run_one(mesh, SETTINGS[name], args.triangles)}
             rows.append(row)
             print(row, flush=True)
             atomic_write_json(args.json, doc)

@@ -2,30 +2,32 @@
 
 Simulators collide meshes through convex hulls. The twin's decomposition (``services/sim/collision_shapes``)
 favours few parts for grasp contacts; an exported asset must also rest and roll like the object, so here the
-parts are checked against the surface: the hull alone when it stays within ``tolerance_m`` of the mesh
-(boxes), else one CoACD run, and the closer of the two is kept, with how far it stands out.
+parts are checked against the surface, cheapest first: the hull alone when it stays within ``tolerance_m`` of
+the mesh (boxes); else horizontal slabs, cut into halves, quarters or sectors where a slab is concave
+(``slabs.py``: a can's rim around its recessed lid, within ~1.8 mm in 1-2 s of CPU, the same parts for the
+same mesh); else, where straight cuts cannot follow the surface (a carton's folded top), CoACD, and the
+closest of all the sets is kept, with how far it stands out.
 
-What drove the parts out of the surface was the part count, not the search: asked for at most 12 parts,
+What drove CoACD's parts out of the surface was the part count, not the search: asked for at most 12 parts,
 CoACD decomposes to its concavity threshold and then merges parts pairwise down to 12, and the merged parts
-spanned a carton's gable and a can's recessed lid (3-10 mm out; CoACD's own concavity rose from 0.05 to
-0.10), and the merging took most of the CPU (22 s on the milk carton). Without the cap and with half the
-tree search, threshold 0.05 kept the cans' parts within about 2 mm in 4-5 s. CoACD's threshold is relative
-to the object's size (its parts stood out about 0.3 x threshold x the bounding box's diagonal on the HOPE
-cans, 0.4 on the cartons: 2 mm on a can, 4.4-4.8 mm on a 19 cm carton), so when the loose run leaves parts
-out by more than the tolerance, a second run at the threshold the size calls for (at least 0.025; 0.030
-on the cartons: 2.8-3.0 mm with 19-29 parts) gets what is left of the CPU budget, and the closer set is
-kept. CoACD runs in a child process under a CPU-time limit (its search cannot be interrupted otherwise,
-and its CPU time varies several-fold between nearly identical meshes): a run out of time leaves the parts
-already made (``parts_coacd`` says which runs ran and how they ended: docs/export.md).
+spanned a carton's gable and a can's recessed lid (3-10 mm out), and the merging took most of the CPU (22 s
+on the milk carton). Without the cap and with half the tree search, threshold 0.05 kept the cans' parts
+within about 2 mm in 4-5 s. CoACD's threshold is relative to the object's size (its parts stood out about
+0.3 x threshold x the bounding box's diagonal on the HOPE cans, 0.4 on the cartons: 2 mm on a can, 4.4-4.8
+mm on a 19 cm carton), so the loose run and one at the threshold the size calls for (at least 0.025; 0.030
+on the cartons: 2.8-3.0 mm) run side by side, each in a child process under its share of a CPU budget (its
+search cannot be interrupted otherwise, and its CPU time varies several-fold between nearly identical
+meshes): a run out of time leaves the other's parts, the slabs' or the hull (``parts_coacd`` says which runs
+ran and how they ended: docs/export.md).
 """
 
 from __future__ import annotations
 
 import io
 import json
-import resource
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,6 +35,7 @@ import numpy as np
 import open3d as o3d
 from scipy.spatial import ConvexHull
 
+from services.export.slabs import hull_samples, slab_parts
 from services.sim.collision_shapes import COACD_PARAMS, have_coacd, hull_vertices
 
 #: Parts may stand out of the surface by this much (m): about the model's own accuracy.
@@ -46,16 +49,20 @@ COACD_THRESHOLDS = (0.025, 0.05)
 DEVIATION_PER_THRESHOLD = 0.3
 #: No cap on the part count (-1): merging down to a cap was what made parts stand out (module doc).
 MAX_PARTS = -1
-#: CoACD decomposes a copy decimated to about this many triangles (parts are checked against the full mesh),
-#: with a coarser search than the twin's: 15 tree-search iterations instead of 60.
-COACD_TRIANGLES = 3000
+#: CoACD's runs, side by side: (loose threshold, else the one the object's size calls for; triangles of the
+#: decimated copy it decomposes, parts checked against the full mesh; share of the CPU budget). Its result
+#: on a carton swings with the copy: threshold 0.030 left the orange-juice carton's parts 6.3 mm out on the
+#: 3,000-triangle copy (20 parts, 4.4 s) and 2.9 mm on the 6,000 one (28 parts, 6.2 s), while on the milk
+#: carton the 3,000 copy gave 2.8 mm (85 parts) and the 6,000 copy ran past 14 s. Two copies at the tight
+#: threshold, and the loose run as a cheap floor (4.4-7.5 mm on the cartons, 3-5 s), keep the closest.
+COACD_RUNS = ((True, 3000, 2.0), (False, 3000, 4.0), (False, 6000, 5.0))
+#: A coarser search than the twin's: 15 tree-search iterations instead of 60.
 COACD_EFFORT = {"preprocess_resolution": 20, "mcts_iterations": 15, "resolution": 500}
-#: CPU seconds both CoACD runs may take together. CoACD's CPU time is erratic: at threshold 0.05 it took
-#: 4.6 s on one Poisson mesh of the milk carton and 16.3 s on the next run's (the same surface to within
-#: numerical noise), 2-8 s on the orange-juice carton; the rest of an export is 7-10 s of CPU.
-COACD_CPU_BUDGET_S = 20.0
-#: The tighter run is not started with less CPU left than this (it could not finish: 7-14 s on the cartons).
-MIN_RUN_S = 6.0
+#: CPU seconds CoACD's runs may take together (shared as ``COACD_RUNS`` says: 5.1, 10.2 and 12.7 s). CoACD's
+#: CPU time is erratic: at threshold 0.05 it took 4.6 s on one Poisson mesh of the milk carton and 16.3 s on
+#: another run's (the same surface to within numerical noise). The rest of an export is about 10 s of CPU on
+#: one core, and the runs use the other meanwhile.
+COACD_CPU_BUDGET_S = 28.0
 #: Samples per part on its hull surface when measuring how far it stands out.
 SAMPLES_PER_PART = 4000
 _WORKER = Path(__file__).with_name("coacd_worker.py")
@@ -63,7 +70,8 @@ _WORKER = Path(__file__).with_name("coacd_worker.py")
 
 @dataclass
 class CollisionParts:
-    """Convex parts (hull vertices, object frame), how they were made and how far they stand out.
+    """Convex parts (hull vertices, object frame), how they were made (``method``: ``hull``, ``slabs`` or
+    ``coacd``) and how far they stand out.
 
     ``max_deviation_m``: the worst part's 99.5th percentile distance outside the mesh; ``p95_deviation_m``:
     the 95th percentile over the parts' whole surface outside the mesh (weighted by area). ``coacd``: what
@@ -81,37 +89,41 @@ class CollisionParts:
         pts = self.parts[k]
         hull = ConvexHull(pts)
         tris = hull.simplices.copy()
-        centre = pts.mean(axis=0)
-        for i, (a, b, c) in enumerate(tris):
-            n = np.cross(pts[b] - pts[a], pts[c] - pts[a])
-            if n @ (pts[a] - centre) < 0:
-                tris[i] = (a, c, b)
+        a, b, c = pts[tris[:, 0]], pts[tris[:, 1]], pts[tris[:, 2]]
+        inward = np.einsum("ij,ij->i", np.cross(b - a, c - a), a - pts.mean(axis=0)) < 0
+        tris[inward] = tris[inward][:, [0, 2, 1]]
         return pts, tris
 
 
+def surface_scene(mesh: o3d.geometry.TriangleMesh) -> o3d.t.geometry.RaycastingScene:
+    """A ray-casting scene of ``mesh`` (signed distances to it), built once per mesh."""
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
+    return scene
+
+
 def deviation_figures(parts: list[np.ndarray], mesh: o3d.geometry.TriangleMesh,
-                      samples_per_part: int = SAMPLES_PER_PART) -> tuple[float, float]:
+                      samples_per_part: int = SAMPLES_PER_PART,
+                      scene: o3d.t.geometry.RaycastingScene | None = None) -> tuple[float, float]:
     """How far (m) the parts' hull surfaces outside the mesh stand from the mesh's surface: (max, p95).
 
     Max: the largest over parts of each part's 99.5th percentile (a maximum robust to sampling). P95: the
     95th percentile over all parts' outside samples, each weighted by its part's area per sample. Faces of
     a part inside the mesh (where two parts meet) are not surface and are not counted.
     """
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(mesh))
+    scene = surface_scene(mesh) if scene is None else scene
     worst = 0.0
     values, weights = [], []
     for pts in parts:
-        hull = ConvexHull(pts)
-        part = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(pts),
-                                         o3d.utility.Vector3iVector(hull.simplices.astype(np.int32)))
-        sample = np.asarray(part.sample_points_uniformly(samples_per_part).points, dtype=np.float32)
-        d = scene.compute_signed_distance(o3d.core.Tensor(sample)).numpy()
+        sample = hull_samples(pts, samples_per_part)
+        if sample is None:
+            continue
+        d = scene.compute_signed_distance(o3d.core.Tensor(sample.astype(np.float32))).numpy()
         outside = d[d > 0]
         if outside.size:
             worst = max(worst, float(np.percentile(outside, 99.5)))
             values.append(outside)
-            weights.append(np.full(outside.size, part.get_surface_area() / samples_per_part))
+            weights.append(np.full(outside.size, ConvexHull(pts).area / samples_per_part))
     if not values:
         return worst, 0.0
     v, w = np.concatenate(values), np.concatenate(weights)
@@ -162,43 +174,54 @@ def coacd_threshold(vertices: np.ndarray, tolerance_m: float) -> float:
 
 def collision_parts(mesh: o3d.geometry.TriangleMesh, tolerance_m: float = TOLERANCE_M,
                     cpu_budget_s: float = COACD_CPU_BUDGET_S) -> CollisionParts:
-    """Parts of ``mesh`` (closed, object frame): the hull within ``tolerance_m``, else the closest of the hull
-    and CoACD's runs (the loose threshold, then the one the object's size calls for), all CoACD runs
-    together limited to ``cpu_budget_s`` of CPU.
+    """Parts of ``mesh`` (closed, object frame): the hull within ``tolerance_m``, else the slabs within it,
+    else the closest of the hull, the slabs and CoACD's runs side by side (``COACD_RUNS``: the loose threshold
+    and the one the object's size calls for, on two copies), sharing ``cpu_budget_s`` of CPU.
 
-    ``coacd`` of the result: ``not_needed``, ``unavailable``, or one entry per run (``"0.050:ok"``,
-    ``"0.025:over_budget"``...) joined by commas.
+    ``coacd`` of the result: ``not_needed`` (the hull or the slabs were close enough), ``unavailable``, or
+    one ``THRESHOLD@TRIANGLES:STATUS`` per run (``"0.050@3000:ok"``, ``"0.030@6000:over_budget"``...) joined
+    by commas.
     """
     v = np.asarray(mesh.vertices, dtype=np.float64)
     t = np.asarray(mesh.triangles, dtype=np.int32)
     hull = [hull_vertices(v)]
-    best = CollisionParts(hull, "hull", *deviation_figures(hull, mesh))
+    scene = surface_scene(mesh)
+    best = CollisionParts(hull, "hull", *deviation_figures(hull, mesh, scene=scene))
     if best.max_deviation_m <= tolerance_m:
         return best
+    slabs = slab_parts(mesh, tolerance_m)
+    if slabs is not None:
+        found = CollisionParts(slabs, "slabs", *deviation_figures(slabs, mesh, scene=scene))
+        if found.max_deviation_m < best.max_deviation_m:
+            best = found
+        if best.max_deviation_m <= tolerance_m:
+            return best
     if not have_coacd():
         best.coacd = "unavailable"
         return best
-    coarse = mesh.simplify_quadric_decimation(COACD_TRIANGLES) if len(t) > COACD_TRIANGLES else mesh
-    cv, ct = np.asarray(coarse.vertices), np.asarray(coarse.triangles)
-    runs: list[str] = []
-    left = cpu_budget_s
-    for threshold in sorted({COACD_THRESHOLDS[1], coacd_threshold(v, tolerance_m)}, reverse=True):
-        if best.max_deviation_m <= tolerance_m or (runs and left < MIN_RUN_S):
-            break
+    size_threshold = coacd_threshold(v, tolerance_m)
+    plan: dict[tuple[float, int], float] = {}  # (threshold, triangles of the copy) -> share of the budget
+    for loose, n, share in COACD_RUNS:
+        plan.setdefault((COACD_THRESHOLDS[1] if loose else size_threshold, min(n, len(t))), share)
+    keys = list(plan)
+    copies = {n: mesh.simplify_quadric_decimation(n) if n < len(t) else mesh for _, n in keys}
+
+    def run(k: int) -> tuple[list[np.ndarray] | None, str]:
+        threshold, n = keys[k]
         params = {**COACD_PARAMS, **COACD_EFFORT, "threshold": threshold, "max_convex_hull": MAX_PARTS}
-        c0 = _children_cpu()
-        parts, status = coacd_in_budget(cv, ct, params, left)
-        left -= _children_cpu() - c0
-        runs.append(f"{threshold:.3f}:{status}")
+        budget = cpu_budget_s * plan[keys[k]] / sum(plan.values())
+        return coacd_in_budget(np.asarray(copies[n].vertices), np.asarray(copies[n].triangles), params, budget)
+
+    # the runs at once: each is a single-threaded child, and the export's other steps run meanwhile
+    with ThreadPoolExecutor(len(keys)) as pool:
+        done = list(pool.map(run, range(len(keys))))
+    runs = []
+    for (threshold, n), (parts, status) in zip(keys, done, strict=True):
+        runs.append(f"{threshold:.3f}@{n}:{status}")
         if parts is not None:
-            found = CollisionParts(parts, "coacd", *deviation_figures(parts, mesh))
+            found = CollisionParts(parts, "coacd", *deviation_figures(parts, mesh, scene=scene))
             if found.max_deviation_m < best.max_deviation_m:
                 best = found
     best.coacd = ",".join(runs)
     return best
 
-
-def _children_cpu() -> float:
-    """CPU seconds of this process's finished children (each CoACD run is one)."""
-    r = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return r.ru_utime + r.ru_stime

@@ -63,8 +63,11 @@ def poisson_surface(xyz: np.ndarray, normals: np.ndarray, rgb: np.ndarray | None
         near = cKDTree(xyz).query(cap_xyz)[1]
         colours = np.vstack([rgb, rgb[near]]).astype(np.float64) / 255.0
         pcd.colors = o3d.utility.Vector3dVector(colours)
+    # one thread: the parallel solve sums in a varying order, and the same session gave a different mesh on
+    # every run (and CoACD's parts of it differed by millimetres and by seconds); on one thread it took
+    # the same CPU time (1.2 s on the milk carton)
     mesh, density = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(
-        pcd, depth=config.poisson_depth, scale=1.1, linear_fit=False)
+        pcd, depth=config.poisson_depth, scale=1.1, linear_fit=False, n_threads=1)
     mesh = _trim_far(mesh, np.asarray(pcd.points), config.trim_far_m)
     mesh = clean(mesh)
     if config.target_triangles and len(mesh.triangles) > config.target_triangles:

@@ -7,7 +7,6 @@ wherever it is copied. Files are written to a temporary name and renamed (``comm
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -60,10 +59,8 @@ def write_obj(mesh: TexturedMesh, out: Path, name: str) -> Path:
         if fname.endswith(".mtl"):
             data = data.replace(b"map_Kd material_0.png", f"map_Kd {name}.png".encode())
             _write_bytes(out / f"{name}.mtl", data)
-        elif fname.lower().endswith((".png", ".jpg", ".jpeg")):
-            buf = io.BytesIO()
-            Image.fromarray(mesh.albedo).save(buf, format="PNG")
-            _write_bytes(out / f"{name}.png", buf.getvalue())
+        elif fname.lower().endswith(".png"):
+            _write_bytes(out / f"{name}.png", data)  # trimesh's encoding of the albedo: not encoded twice
     return _write_text(out / f"{name}.obj", text)
 
 
@@ -153,29 +150,51 @@ def urdf_text(name: str, visual_mesh: str, part_files: list[str], inertial: Iner
     return "\n".join(lines)
 
 
-def write_all(mesh: TexturedMesh, parts: CollisionParts, inertial: Inertial, out: Path, name: str,
-              formats: tuple[str, ...] = FORMATS) -> dict[str, list[str]]:
-    """Write the requested ``formats`` into ``out``; returns {format: [relative file paths]}."""
+def _check_formats(formats: tuple[str, ...]) -> None:
     unknown = sorted(set(formats) - set(FORMATS))
     if unknown:
         raise ExportError(f"unknown export format(s) {unknown}; known: {list(FORMATS)}", code="bad_argument")
+
+
+def write_meshes(mesh: TexturedMesh, out: Path, name: str, formats: tuple[str, ...] = FORMATS) -> dict[str, list[str]]:
+    """The mesh files of ``formats`` (OBJ also when MJCF or URDF need it as their visual); {format: [files]}.
+
+    They need no collision parts: the export writes them while the parts are being made.
+    """
+    _check_formats(formats)
+    out = Path(out)
+    files: dict[str, list[str]] = {}
+    if "obj" in formats or "mjcf" in formats or "urdf" in formats:
+        write_obj(mesh, out, name)
+        files["obj"] = [f"{name}.obj"] + ([f"{name}.mtl", f"{name}.png"] if mesh.textured else [])
+    for fmt, writer in (("glb", write_glb), ("ply", write_ply), ("stl", write_stl)):
+        if fmt in formats:
+            files[fmt] = [str(Path(writer(mesh, out, name)).relative_to(out))]
+    return files
+
+
+def write_asset(textured: bool, parts: CollisionParts, inertial: Inertial, out: Path, name: str,
+                formats: tuple[str, ...] = FORMATS) -> dict[str, list[str]]:
+    """The simulation assets of ``formats`` (MJCF, URDF) and their convex parts, beside the OBJ
+    ``write_meshes`` wrote (``textured``: it has the albedo PNG); {format: [files]}."""
+    _check_formats(formats)
     out = Path(out)
     files: dict[str, list[str]] = {}
     rel = lambda p: str(Path(p).relative_to(out))  # noqa: E731
-    needs_obj = "obj" in formats or "mjcf" in formats or "urdf" in formats
-    if needs_obj:
-        write_obj(mesh, out, name)
-        files["obj"] = [f"{name}.obj"] + ([f"{name}.mtl", f"{name}.png"] if mesh.textured else [])
     part_files: list[str] = []
     if "mjcf" in formats or "urdf" in formats:
         part_files = [rel(p) for p in write_parts(parts, out, name)]
     if "mjcf" in formats:
-        text = mjcf_text(name, f"{name}.obj", f"{name}.png" if mesh.textured else None, part_files, inertial)
+        text = mjcf_text(name, f"{name}.obj", f"{name}.png" if textured else None, part_files, inertial)
         files["mjcf"] = [rel(_write_text(out / f"{name}.xml", text))] + part_files
     if "urdf" in formats:
         files["urdf"] = [rel(_write_text(out / f"{name}.urdf", urdf_text(name, f"{name}.obj", part_files, inertial)))] \
             + part_files
-    for fmt, writer in (("glb", write_glb), ("ply", write_ply), ("stl", write_stl)):
-        if fmt in formats:
-            files[fmt] = [rel(writer(mesh, out, name))]
     return files
+
+
+def write_all(mesh: TexturedMesh, parts: CollisionParts, inertial: Inertial, out: Path, name: str,
+              formats: tuple[str, ...] = FORMATS) -> dict[str, list[str]]:
+    """Write the requested ``formats`` into ``out``; returns {format: [relative file paths]}."""
+    files = write_meshes(mesh, out, name, formats)
+    return {**files, **write_asset(mesh.textured, parts, inertial, out, name, formats)}
