@@ -15,6 +15,7 @@ Variants (``VARIANTS``):
 * ``half_resolution``: seed and forward both on half-resolution images, forward (16, 16): no full-resolution
   level.
 * ``fine_only``: forward (0, 0, 1): the reverse seed, then only the full-resolution iteration.
+* ``quarter_seed``: the reverse seed pass on quarter-resolution images (160 x 120), the forward as shipped.
 * ``tensor``: Open3D's tensor odometry (``o3d.t.pipelines.odometry.rgbd_odometry_multi_scale``, Hybrid
   term, CPU) for the forward pass, (16, 16, 1) iterations, the legacy reverse seed kept.
 * ``tensor_seed``: the tensor odometry for the reverse seed pass (half resolution, (16, 16)), the legacy
@@ -42,7 +43,7 @@ import numpy as np
 from common.geometry import invert
 from common.messages import RGBDFrame
 
-VARIANTS = ("default", "half_resolution", "fine_only", "tensor", "tensor_seed")
+VARIANTS = ("default", "half_resolution", "fine_only", "quarter_seed", "tensor", "tensor_seed")
 # the tensor odometry's loss: pixel pairs farther apart in depth than the legacy ``odometry_max_depth_diff`` are
 # outliers; the Huber deltas must not exceed that truncation (Open3D warns and degrades to L2 otherwise)
 TENSOR_DEPTH_HUBER_M = 0.01
@@ -87,6 +88,7 @@ def variant(name: str) -> Iterator[dict[str, Any]]:
     overrides: dict[str, Any] = {
         "half_resolution": {"odometry_step": 2, "odometry_iterations": (16, 16), "odometry_seed_step": 1},
         "fine_only": {"odometry_iterations": (0, 0, 1)},
+        "quarter_seed": {"odometry_seed_step": 4},
     }.get(name, {})
     frames: dict[int, RGBDFrame] = {}  # PriorScan -> its frame (the tensor path starts from the raw images)
     prepare = dp._prepare
