@@ -5,7 +5,7 @@ calls per scan pair: the reverse seed pass at half resolution, then the forward 
 it is where a speed-up would come from. The odometry is also what pins plain symmetric objects (it sees the
 whole scene, table included): a cheaper setting that lands a few millimetres off still passes the scan check
 and is fused. This bench runs the static stage (``register_view`` on every view, in this process, one thread)
-of ``bench reconstruct``'s sessions with the odometry swapped for each variant, and reports per object the
+of ``bench reconstruct``'s sessions under each odometry setting, and reports per object the
 worst scan pose error against the twin's truth (relative to scan 0, ``static_max_trans_err_mm``, as
 ``bench reconstruct``), the odometry's CPU seconds per scan pair and the stage's CPU seconds.
 
@@ -16,12 +16,13 @@ Variants (``VARIANTS``):
   level.
 * ``fine_only``: forward (0, 0, 1): the reverse seed, then only the full-resolution iteration.
 * ``quarter_seed``: the reverse seed pass on quarter-resolution images (160 x 120), the forward as shipped.
-* ``tensor``: Open3D's tensor odometry (``o3d.t.pipelines.odometry.rgbd_odometry_multi_scale``, Hybrid
-  term, CPU) for the forward pass, (16, 16, 1) iterations, the legacy reverse seed kept.
-* ``tensor_seed``: the tensor odometry for the reverse seed pass (half resolution, (16, 16)), the legacy
-  forward kept.
 
-``--objects box,milk`` (default: every object of both sets), ``--variants default,tensor`` (default: all),
+Each variant is a ``StaticConfig`` of the public API (the benchmarks use registration through it only), so
+what it measures is what a user would get from that setting. Open3D's tensor odometry is not a setting of the
+static stage; its figures in docs/static-registration.md were measured by swapping the default profile's
+odometry calls for it, with the same priors and iterations.
+
+``--objects box,milk`` (default: every object of both sets), ``--variants default,fine_only`` (default: all),
 ``--views N`` (first N views of each session). Sessions are ``bench reconstruct``'s (recorded now, or reused
 from ``$OBJSCAN_BENCH_SESSION_DIR``). CPU seconds are the thread's own, so they hold on a loaded machine.
 """
@@ -32,108 +33,39 @@ import os
 import sys
 import tempfile
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
-from unittest import mock
 
-import numpy as np
-
-from common.geometry import invert
 from common.messages import RGBDFrame
 
-VARIANTS = ("default", "half_resolution", "fine_only", "quarter_seed", "tensor", "tensor_seed")
-# the tensor odometry's loss: pixel pairs farther apart in depth than the legacy ``odometry_max_depth_diff`` are
-# outliers; the Huber deltas must not exceed that truncation (Open3D warns and degrades to L2 otherwise)
-TENSOR_DEPTH_HUBER_M = 0.01
-TENSOR_INTENSITY_HUBER = 0.1
-
-
-def tensor_odometry(source: RGBDFrame, target: RGBDFrame, init: np.ndarray, cfg: Any, iterations: tuple[int, ...],
-                    step: int = 1) -> np.ndarray:
-    """T_target_source from Open3D's tensor RGB-D odometry (Hybrid term, CPU), on ``step``-decimated images,
-    with the legacy path's depth range and depth-difference limit."""
-    import open3d as o3d
-
-    todo = o3d.t.pipelines.odometry
-
-    def image(frame: RGBDFrame) -> Any:
-        depth = np.asarray(frame.depth)[::step, ::step].astype(np.float32) * np.float32(frame.depth_scale)
-        depth[depth < cfg.depth_min] = 0.0
-        color = np.asarray(frame.color)[::step, ::step].astype(np.float32) / np.float32(255.0)
-        return o3d.t.geometry.RGBDImage(o3d.t.geometry.Image(o3d.core.Tensor(np.ascontiguousarray(color))),
-                                        o3d.t.geometry.Image(o3d.core.Tensor(np.ascontiguousarray(depth))))
-
-    k = source.intrinsics
-    K = np.array([[k.fx / step, 0.0, k.cx / step], [0.0, k.fy / step, k.cy / step], [0.0, 0.0, 1.0]])
-    params = todo.OdometryLossParams(depth_outlier_trunc=cfg.odometry_max_depth_diff,
-                                     depth_huber_delta=TENSOR_DEPTH_HUBER_M,
-                                     intensity_huber_delta=TENSOR_INTENSITY_HUBER)
-    result = todo.rgbd_odometry_multi_scale(
-        image(source), image(target), o3d.core.Tensor(K), o3d.core.Tensor(np.asarray(init, dtype=np.float64)),
-        1.0, cfg.depth_max, [todo.OdometryConvergenceCriteria(n) for n in iterations], todo.Method.Hybrid, params)
-    return result.transformation.numpy()
-
-
-@contextmanager
-def variant(name: str) -> Iterator[dict[str, Any]]:
-    """The static config overrides of variant ``name``; the tensor variants also swap the default profile's
-    odometry (forward pass or reverse seed) for ``tensor_odometry`` while the block runs."""
-    from services.registration.static import default_profile as dp
-    from services.registration.static.plausibility import plausible
-
-    if name not in VARIANTS:
-        raise ValueError(f"unknown odometry variant {name!r}; known: {', '.join(VARIANTS)}")
-    overrides: dict[str, Any] = {
-        "half_resolution": {"odometry_step": 2, "odometry_iterations": (16, 16), "odometry_seed_step": 1},
-        "fine_only": {"odometry_iterations": (0, 0, 1)},
-        "quarter_seed": {"odometry_seed_step": 4},
-    }.get(name, {})
-    frames: dict[int, RGBDFrame] = {}  # PriorScan -> its frame (the tensor path starts from the raw images)
-    prepare = dp._prepare
-
-    def prepare_keeping_frame(scan: Any, frame: RGBDFrame, cfg: Any) -> Any:
-        data = prepare(scan, frame, cfg)
-        frames[id(data)] = frame
-        return data
-
-    def forward(src: Any, tgt: Any, init: np.ndarray, cfg: Any) -> tuple[bool, np.ndarray]:
-        return True, tensor_odometry(frames[id(src)], frames[id(tgt)], init, cfg, cfg.odometry_iterations)
-
-    def seed(src: Any, tgt: Any, prior: np.ndarray, cfg: Any) -> np.ndarray:
-        T = invert(tensor_odometry(frames[id(tgt)], frames[id(src)], invert(prior), cfg,
-                                   cfg.odometry_seed_iterations, step=cfg.odometry_step * cfg.odometry_seed_step))
-        return T if plausible(T, prior, cfg) else prior
-
-    patches = {"tensor": {"_odometry": forward}, "tensor_seed": {"reverse_seed": seed}}.get(name, {})
-    with mock.patch.multiple(dp, _prepare=prepare_keeping_frame, **patches) if patches else _nothing():
-        yield overrides
-
-
-@contextmanager
-def _nothing() -> Iterator[None]:
-    yield
+#: Each variant's ``StaticConfig`` overrides (``default``: none).
+VARIANTS: dict[str, dict[str, Any]] = {
+    "default": {},
+    "half_resolution": {"odometry_step": 2, "odometry_iterations": (16, 16), "odometry_seed_step": 1},
+    "fine_only": {"odometry_iterations": (0, 0, 1)},
+    "quarter_seed": {"odometry_seed_step": 4},
+}
 
 
 def measure_views(views: list[list[RGBDFrame]], cfg: Any, name: str) -> dict[str, Any]:
     """One object's static stage under variant ``name``: worst pose error, CPU, and how the scans went."""
-    from services.registration.static import register_view
-    from services.registration.static.pose_errors import relative_pose_errors
+    from services.registration.api import register_view, relative_pose_errors
 
+    if name not in VARIANTS:
+        raise ValueError(f"unknown odometry variant {name!r}; known: {', '.join(VARIANTS)}")
     errors, cpu, odometry, pairs, left_out, methods = [], 0.0, 0.0, 0, 0, {}
-    with variant(name) as overrides:
-        config = cfg.with_(**overrides)
-        for frames in views:
-            t = time.thread_time()
-            result = register_view(frames, config)
-            cpu += time.thread_time() - t
-            odometry += result.cpu_timings.get("odometry", 0.0)
-            errors.extend(e[0] for e in relative_pose_errors(result, frames) or [])
-            for s in result.scans[1:]:
-                pairs += 1
-                left_out += not s.fused
-                methods[s.method] = methods.get(s.method, 0) + 1
+    config = cfg.with_(**VARIANTS[name])
+    for frames in views:
+        t = time.thread_time()
+        result = register_view(frames, config)
+        cpu += time.thread_time() - t
+        odometry += result.cpu_timings.get("odometry", 0.0)
+        errors.extend(e[0] for e in relative_pose_errors(result, frames) or [])
+        for s in result.scans[1:]:
+            pairs += 1
+            left_out += not s.fused
+            methods[s.method] = methods.get(s.method, 0) + 1
     return {
         "variant": name,
         "static_max_trans_err_mm": round(max(errors), 3) if errors else None,
@@ -153,7 +85,7 @@ def session_views(object_set: str, name: str, sessions: Path, limit: int | None)
     from bench.reconstruct import session_and_truth
     from common.pose_accuracy import session_pose_accuracy
     from common.session_folder import read_scan, read_session
-    from services.registration.static import StaticConfig
+    from services.registration.api import StaticConfig
 
     session = read_session(session_and_truth(object_set, name, sessions)[0])
     accuracy, source = session_pose_accuracy(session.data)
@@ -162,7 +94,7 @@ def session_views(object_set: str, name: str, sessions: Path, limit: int | None)
     return [[read_scan(session.path, k, j) for j in session.scans(k)] for k in indices], cfg
 
 
-def run(objects: list[str] | None = None, variants: tuple[str, ...] = VARIANTS, views: int | None = None,
+def run(objects: list[str] | None = None, variants: tuple[str, ...] = tuple(VARIANTS), views: int | None = None,
         say: Callable[[str], None] = print) -> dict[str, Any]:
     """Every (object, variant)'s figures, objects in ``bench reconstruct``'s order."""
     from bench.reconstruct import set_objects
@@ -196,7 +128,7 @@ def main() -> None:
     objects = value("--objects")
     variants = value("--variants")
     views = value("--views")
-    figures = run(objects.split(",") if objects else None, tuple(variants.split(",")) if variants else VARIANTS,
+    figures = run(objects.split(",") if objects else None, tuple(variants.split(",")) if variants else tuple(VARIANTS),
                   int(views) if views else None)
     out = value("--json")
     if out:

@@ -1,15 +1,13 @@
-"""The odometry-variant bench: the default variant is the shipped static stage, a variant really swaps the odometry
-(and puts it back), and an unknown variant is refused."""
+"""The odometry-setting bench: the default variant is the shipped static stage, a variant runs the static stage
+with its own setting, and an unknown variant is refused."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from bench import reconstruct_odometry as ro
-from services.registration.static import StaticConfig, register_view
-from services.registration.static import default_profile as dp
-from services.registration.static.pose_errors import relative_pose_errors
+from services.registration import api
+from services.registration.api import StaticConfig, register_view, relative_pose_errors
 
 
 @pytest.fixture(scope="module")
@@ -27,24 +25,18 @@ def test_the_default_variant_is_the_shipped_static_stage(view):
     assert row["odometry_cpu_s"] > 0
 
 
-def test_the_tensor_variant_runs_the_tensor_odometry_and_restores_the_legacy_one(view, monkeypatch):
-    calls = []
-    tensor = ro.tensor_odometry
+def test_a_variant_runs_the_static_stage_with_its_setting(view, monkeypatch):
+    seen = []
+    real = register_view
 
-    def counted(*args, **kwargs):  # noqa: ANN002, ANN003
-        calls.append(kwargs.get("step", 1))
-        return tensor(*args, **kwargs)
+    def spy(frames, config):  # noqa: ANN001, ANN202
+        seen.append(config)
+        return real(frames, config)
 
-    monkeypatch.setattr(ro, "tensor_odometry", counted)
-    legacy = dp._odometry
-    row = ro.measure_views([view], StaticConfig(), "tensor")
-    assert calls and set(calls) == {1}  # the forward pass, at full resolution, once per pair at least
-    assert row["pairs"] == 2 and np.isfinite(row["static_max_trans_err_mm"])
-    assert dp._odometry is legacy
-    calls.clear()
-    ro.measure_views([view], StaticConfig(), "tensor_seed")
-    assert calls and set(calls) == {2}  # the reverse seed, at half resolution
-    assert dp.reverse_seed.__module__ == dp.__name__
+    monkeypatch.setattr(api, "register_view", spy)
+    row = ro.measure_views([view], StaticConfig(), "fine_only")
+    assert [c.odometry_iterations for c in seen] == [(0, 0, 1)]
+    assert row["pairs"] == 2
 
 
 def test_an_unknown_variant_is_refused(view):
