@@ -19,7 +19,7 @@ import numpy as np
 
 from common.atomic import atomic_write_bytes
 from common.session_folder import REPORT_FILE
-from services.cli.cmd_scan import console
+from services.cli.console import console
 from services.cli.outcome import FAILED, OK, error_line, print_json, require_path, warn_unaccepted
 
 

@@ -28,7 +28,6 @@ from collections.abc import Mapping
 from pathlib import Path, PurePosixPath
 from typing import Any
 
-from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from common import keys
@@ -41,14 +40,13 @@ from common.session_folder import MODEL_FILE, REPORT_FILE
 from common.zenoh_config import DEFAULT_ROUTER_PORT, free_tcp_port
 from services.cell import SERVICE_MODULES, cell_specs, needs_twin
 from services.cli.cells import add_network_args, remote_session, session_name
+from services.cli.console import console
 from services.cli.outcome import BadUsage, error_line, one_line, print_json, require_path, warn_unaccepted
 from services.cli.scan_config import FLAG_KEYS, add_config_args, scan_config
 from services.cli.stop import StopOnInterrupt
 from services.live import add_live_args, live_requested, open_live_view
 from services.orchestrator.config import AcquisitionConfig
 from services.private_cell import DEFAULT_GRACE_S, PrivateCell, cell_lock_path, find_cell, start_cell
-
-console = Console()
 
 
 def register(sub) -> None:  # noqa: ANN001

@@ -17,8 +17,8 @@ pytestmark = pytest.mark.timeout(120)
 OTHER_COMMANDS_MODULES = ("services.calibration.procedure", "services.export", "mujoco", "cv2")
 
 
-def _modules_after(argv: list[str]) -> tuple[int, list[str]]:
-    """(exit code, the heavy modules imported) when ``objscan ARGV`` runs in a fresh interpreter."""
+def _modules_after(argv: list[str], watched: tuple[str, ...] = OTHER_COMMANDS_MODULES) -> tuple[int, list[str]]:
+    """(exit code, the ``watched`` modules imported) when ``objscan ARGV`` runs in a fresh interpreter."""
     code = (
         "import json, sys\n"
         "from services.cli.main import main\n"
@@ -26,7 +26,7 @@ def _modules_after(argv: list[str]) -> tuple[int, list[str]]:
         f"    rc = main({argv!r})\n"
         "except SystemExit as exc:\n"
         "    rc = exc.code\n"
-        f"print(json.dumps([rc, sorted(m for m in sys.modules if m in {OTHER_COMMANDS_MODULES!r})]))\n"
+        f"print(json.dumps([rc, sorted(m for m in sys.modules if m in {watched!r})]))\n"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=100)
     rc, modules = json.loads(proc.stdout.strip().splitlines()[-1])
@@ -35,6 +35,14 @@ def _modules_after(argv: list[str]) -> tuple[int, list[str]]:
 
 def test_reconstruct_help_imports_no_other_command():
     rc, modules = _modules_after(["reconstruct", "--help"])
+    assert rc == 0
+    assert modules == []
+
+
+def test_reconstruct_imports_neither_the_scan_command_nor_zenoh():
+    """Reconstructing a session talks to no cell: the scan command's module (and, through it, Zenoh, the cell
+    launcher and the acquisition config) is not imported for its console."""
+    rc, modules = _modules_after(["reconstruct", "--help"], ("services.cli.cmd_scan", "zenoh", "common.client"))
     assert rc == 0
     assert modules == []
 
