@@ -33,6 +33,7 @@ from services.grasp.collision import (
 from services.grasp.completion import complete_hidden_sides, horizontal_axes
 from services.grasp.config import GraspPlannerConfig
 from services.grasp.errors import GraspInputError
+from services.grasp.pitch import pitch_poses
 from services.grasp.poses import frontal_rotation, grasp_poses, top_down_rotation
 from services.grasp.ranking import RankedPair, rank_region_pair
 from services.grasp.result import GraspPlan, PlannedGrasp, Rejections
@@ -286,6 +287,9 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
             grasp.poses.update(roll_poses(grasp.poses, R, section[0], cfg.top_down_roll_deg, inp.up, center,
                                           cfg.turn_deg, np.asarray(cfg.approach_origin, float)))
             grasp.metrics["section_radius"] = section[1]
+        elif cfg.top_down_pitch_deg:  # a box: the pitched picks a box thin along the line from the base needs
+            grasp.poses.update(pitch_poses(grasp.poses, R, cfg.top_down_pitch_deg, inp.up,
+                                           np.asarray(cfg.approach_origin, float)))
         out.append(grasp)
         slots[(axis, source)] = slots.get((axis, source), 0) + 1
     out.sort(key=_order)

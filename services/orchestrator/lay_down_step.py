@@ -21,6 +21,7 @@ import numpy as np
 
 from common.api import ViewResult
 from common.session_folder import view_dir
+from services.grasp.pitch import pitched
 from services.orchestrator.lay_down import (
     LayDownPoses,
     as_recorded,
@@ -65,21 +66,24 @@ async def try_lay_down(acq: Acquisition, k: int, view: ViewResult, box: tuple[np
     scannable: dict[tuple, bool] = {}
     checks = 0
     for d in carry_shifts(view.center, rc):
-        for gi in order:
+        # pitched picks first: they lean away from the base, which the arm reaches wherever it can pick at all
+        chains = sorted(((gi, seq) for gi in order for seq in lay_down_sequences(
+            plan.grasps[gi], view.cloud.xyz, view.center, view.height, acq.config.turn, [d])),
+            key=lambda c: not pitched(c[1].name))
+        for gi, seq in chains:
+            if checks >= rc.max_checks:
+                break
             grasp = plan.grasps[gi]
-            for seq in lay_down_sequences(grasp, view.cloud.xyz, view.center, view.height, acq.config.turn, [d]):
-                if checks >= rc.max_checks:
-                    break
-                if not await acq._scannable_spot(seq.lying_center, seq.lying_height, scannable):
-                    continue
-                checks += 1
-                acq.j.counters.grasp_checks += 1
-                q_start = await acq._dry_run(k, seq, view.center, float(grasp.width), failures)
-                if q_start is None:
-                    continue
-                outcome = await _execute(acq, k, gi, seq, q_start, box, failures, plan.grasps[gi])
-                if outcome is not None:
-                    return outcome
+            if not await acq._scannable_spot(seq.lying_center, seq.lying_height, scannable):
+                continue
+            checks += 1
+            acq.j.counters.grasp_checks += 1
+            q_start = await acq._dry_run(k, seq, view.center, float(grasp.width), failures)
+            if q_start is None:
+                continue
+            outcome = await _execute(acq, k, gi, seq, q_start, box, failures, grasp)
+            if outcome is not None:
+                return outcome
     acq.decide("no lay-down executable", checks=checks)
     return None
 

@@ -6,6 +6,7 @@ Zenoh), as in test_recovery.py."""
 from __future__ import annotations
 
 import asyncio
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,9 +15,11 @@ from common.api import ViewResult
 from common.messages import PointCloud
 from services.arm.drivers.sim import SimArmDriver
 from services.arm.kinematics import Kinematics
-from services.orchestrator.config import AcquisitionConfig, TurnMotion
-from services.orchestrator.lay_down import LAY_DOWN, lay_down_sequences, stands_tall, whole_object
-from services.orchestrator.machine import Acquisition, AcquisitionFailed, State
+from services.grasp.planner import plan_grasps
+from services.grasp.service import GraspService
+from services.orchestrator.config import AcquisitionConfig, RelocationConfig, TurnMotion
+from services.orchestrator.lay_down import LAY_DOWN, carry_shifts, lay_down_sequences, stands_tall, whole_object
+from services.orchestrator.machine import Acquisition, State
 from services.session_store import SessionStore
 from tests.grasp.shapes import box, table_plane
 from tests.orchestrator.test_recovery import PlanningCell, _cams, _steps
@@ -100,17 +103,59 @@ def test_a_lay_down_released_restarts_the_views_lying_and_says_so(tmp_path):
     assert acq._lying(lying.cloud.xyz, lying.height)  # planned frontal and top-down alike, top-down first
 
 
-@pytest.mark.slow  # every standing chain is dry-run first (as in a real acquisition): about three minutes, loaded
-def test_a_tall_box_that_no_grasp_picks_names_reach_after_trying_to_lay_it_down(kin, tmp_path):
+def test_a_tall_box_thin_along_the_line_from_the_base_has_an_executable_lay_down(kin):
     """The generated tall box (6.6 cm thin along the line from the base, 10.9 cm across: wider than the gripper
-    opens) at the workspace centre: every grasp across its 6.6 cm approaches from the side, which the arm does
-    not reach; the lay-down is tried at the view's last chance and is not executable either (its pick is the
-    same), so the run ends naming reach and every strategy tried, the lay-down among them."""
+    opens) at the workspace centre: every grasp across its 6.6 cm closes along the line from the base, so no
+    frontal or top-down chain of it reaches (the approach would lean sideways, which the arm never reaches);
+    the top-down pick pitched 40 degrees away from the base does, and its lay-down (roll, then tip until the
+    approach is level, the object's top toward the base) is executable in full, by the arm's own line checks.
+    (That no turn of it is executable, nor the lay-down of any unpitched grasp, the state machine's test below
+    finds by dry-running them all.)"""
+    from tests.orchestrator.test_turn_reach import _executable
+
+    view = _view(TALL_BOX, WORKSPACE, 0)
+    plan = plan_grasps(view.cloud.xyz, view.cloud.normals, table_plane(),
+                       replace(GraspService.planner_config(), mode="both"))
+    grasps = plan.to_messages()
+    assert grasps, plan.explain()
+    motion = TurnMotion()
+    lay_downs = [s for g in grasps for s in lay_down_sequences(g, view.cloud.xyz, view.center, view.height, motion,
+                                                                carry_shifts(view.center, RelocationConfig()))]
+    seq = next((s for s in sorted(lay_downs, key=lambda s: "_pitch" not in s.name) if _executable(kin, s)), None)
+    assert seq is not None, [s.name for s in lay_downs]
+    assert "_pitch" in seq.name
+    pts = whole_object(view.cloud.xyz, view.center)
+    rest = seq.turned @ _held(grasps, seq)  # the object's motion from standing to where it is released
+    lying = pts @ rest[:3, :3].T + rest[:3, 3]
+    assert float(lying[:, 2].min()) == pytest.approx(0.004, abs=1e-6)  # released just above the table
+    assert float(np.ptp(lying[:, 2])) == pytest.approx(TALL_BOX[1], abs=0.01)  # its 10.9 cm now stands up
+    # its thin side lies across the line from the base: the way a top-down grasp reaches
+    assert float(np.ptp(lying[:, 1])) == pytest.approx(TALL_BOX[0], abs=0.01)
+    assert np.linalg.norm(seq.lying_center[:2] - WORKSPACE[:2]) < 0.03  # centred where it stood
+
+
+def _held(grasps, seq):  # noqa: ANN001, ANN202
+    """Inverse of the unpitched grasp pose of the pitched pick ``seq`` (the pads swapped for a rolled one): once
+    seated on the pads the object is held as that grasp holds it."""
+    from services.orchestrator.lay_down import ROLL_HALF
+
+    g = next(g for g in grasps if any(np.allclose(seq.grasp, p.matrix() @ f) for p in g.poses.values()
+                                      for f in (np.eye(4), ROLL_HALF)))
+    seated = g.poses["grasp"].matrix()
+    return np.linalg.inv(seated @ ROLL_HALF if "_rolled" in seq.name else seated)
+
+
+@pytest.mark.slow  # every standing chain is dry-run first (as in a real acquisition): a few minutes, loaded
+def test_a_tall_box_thin_along_the_line_from_the_base_is_laid_down_and_the_views_restart(kin, tmp_path):
+    """The same box in the state machine at the view's last chance: no turn, no reposition is executable, so it
+    is laid down by the pitched pick, and the views restart at 0 where it lies (it stopped "limit: reach"
+    before)."""
     _, acq = _standing_tall_box(kin, tmp_path, rescans=2)
-    with pytest.raises(AcquisitionFailed, match="limit: reach") as err:
-        asyncio.run(_steps(acq, 8))
-    assert "lay down (not executable)" in str(err.value)
-    assert acq.j.laid_down is None and any(d["what"] == "no lay-down executable" for d in acq.j.decisions)
+    states = asyncio.run(_steps(acq, 8))
+    assert states[-1] == State.SCAN, acq.j.decisions[-5:]
+    assert acq.j.laid_down["state"] == "done" and "_pitch" in acq.j.laid_down["pose"]
+    assert acq.view == 0 and acq.j.counters.lay_downs == 1
+    assert "laid on its side" in acq._recoveries_tried(0)
 
 
 def test_a_lay_down_finished_before_a_restart_is_recorded_not_repeated(tmp_path):
