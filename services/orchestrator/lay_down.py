@@ -65,6 +65,7 @@ class LayDownPoses(TurnPoses):
     lying_height: float = 0.0
     lying_corners: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))  # footprint's lowest, highest
     roll_deg: float = 0.0  # a turn about the hand's approach through ``pivot`` before the tip (a pitched pick)
+    roll_last: bool = False  # the roll after the tip instead (about the tipped approach)
 
     def straight_moves(self, center: np.ndarray) -> list[ChainMove]:
         """Down to the pre-grasp, approach, lift, carry, tip (in ``TIP_STEP_DEG`` chords), set down,
@@ -76,11 +77,15 @@ class LayDownPoses(TurnPoses):
         carried[:3, 3] += self.carry
         if float(np.linalg.norm(self.carry)) > 1e-6:
             moves += [ChainMove("carry", w, "held") for w in carry_line(self.lifted, carried)]
-        if self.roll_deg:
+        if self.roll_deg and not self.roll_last:
             rolled = tip_arc(carried, carried[:3, 0], self.pivot, self.roll_deg)
             moves += [ChainMove("lay down", w, "held") for w in rolled]
             carried = rolled[-1]
-        moves += [ChainMove("lay down", w, "held") for w in tip_arc(carried, self.axis, self.pivot, self.tip_deg)]
+        tipped = tip_arc(carried, self.axis, self.pivot, self.tip_deg)
+        moves += [ChainMove("lay down", w, "held") for w in tipped]
+        if self.roll_deg and self.roll_last:
+            moves += [ChainMove("lay down", w, "held")
+                      for w in tip_arc(tipped[-1], tipped[-1][:3, 0], self.pivot, self.roll_deg)]
         moves += [ChainMove("set down", self.turned, "held"),
                   ChainMove("retreat", self.retreat, "released"),
                   ChainMove("up", self.above_retreat, "released")]
@@ -141,19 +146,22 @@ def lay_down_sequences(grasp: Grasp, xyz: np.ndarray, center: np.ndarray, height
             for flip, tag in ((np.eye(4), ""), (ROLL_HALF, "_rolled")):  # the pads swapped: another wrist branch
                 if pitched(name):  # held, once seated on the pads, as the unpitched grasp holds it
                     args = (poses[name] @ flip, pre @ flip, poses["grasp"] @ flip, name + tag, pts)
-                    seq = _leaned(*args, d, motion)
-                    if seq is not None:  # it lies beyond the hand: carried so that it lies centred on its spot
-                        seq = _leaned(*args, d + np.array([*(center[:2] + d[:2] - seq.lying_center[:2]), 0.0]),
-                                      motion)
-                else:
-                    seq = _tipped(grasp, poses[name] @ flip, pre @ flip, name + tag, pts, d, motion)
+                    for last in (True, False):
+                        seq = _leaned(*args, d, motion, last)
+                        if seq is not None:  # it lies beyond the hand: carried so that it lies centred on its spot
+                            seq = _leaned(*args, d + np.array([*(center[:2] + d[:2] - seq.lying_center[:2]), 0.0]),
+                                          motion, last)
+                        if seq is not None:
+                            out.append(seq)
+                    continue
+                seq = _tipped(grasp, poses[name] @ flip, pre @ flip, name + tag, pts, d, motion)
                 if seq is not None:
                     out.append(seq)
     return out
 
 
 def _leaned(g: np.ndarray, pre: np.ndarray, seated: np.ndarray, name: str, pts: np.ndarray, d: np.ndarray,
-            motion: TurnMotion) -> LayDownPoses | None:
+            motion: TurnMotion, roll_last: bool = False) -> LayDownPoses | None:
     """The lay-down of a pitched top-down pick ``g`` (``services/grasp/pitch.py``) carried by ``d``: the hand
     rolls 90 degrees about its approach (the grasp line turns across the line from the base), then pitches
     about the grasp line until its approach points horizontally away from the base (the object's top toward
@@ -162,7 +170,9 @@ def _leaned(g: np.ndarray, pre: np.ndarray, seated: np.ndarray, name: str, pts: 
     all the way (one rotation straight to the end needed a wrist flip half-way, measured). Then it lowers the
     object until its lowest point is ``RELEASE_GAP`` above the table and leaves straight up, the pads sliding
     off the object's sides. ``seated`` is the unpitched grasp: once lifted the object sits on the pads as that
-    grasp holds it. None when the grasp line is not level when seated."""
+    grasp holds it. ``roll_last``: tip first (about the hand's z, until the approach is level), then roll
+    (about the level approach); which of the two orders keeps the wrist on one branch depends on the pick
+    (measured on a registered view: only roll-last did). None when the grasp line is not level when seated."""
     if abs(float(seated[2, 1])) > 0.2:
         return None
     held = np.linalg.inv(seated)  # the object's standing pose in the hand, once seated
@@ -171,27 +181,40 @@ def _leaned(g: np.ndarray, pre: np.ndarray, seated: np.ndarray, name: str, pts: 
     x = np.array([out[0], out[1], 0.0])
     carried0 = g.copy()
     carried0[:3, 3] += d
-    best: tuple[float, float, np.ndarray] | None = None
-    for roll in (90.0, -90.0):
-        rolled = rotation_about_line(g[:3, 0], tcp, np.radians(roll)) @ carried0
-        for z in (np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0])):
-            final = np.column_stack([x, np.cross(z, x), z])
-            rotvec = Rotation.from_matrix(final @ rolled[:3, :3].T).as_rotvec()
-            if best is None or np.linalg.norm(rotvec) < np.linalg.norm(best[2]):
-                best = (roll, 0.0, rotvec)
-    assert best is not None
-    roll, _, rotvec = best
-    angle = float(np.degrees(np.linalg.norm(rotvec)))
-    if angle < 1e-6:
-        return None
-    axis = rotvec / np.linalg.norm(rotvec)
+    if roll_last:  # about the hand's z until the approach is level, then about the level approach
+        lean = float(np.degrees(np.arccos(np.clip(-g[2, 0], -1.0, 1.0))))  # the approach's angle from straight down
+        tips = [(90.0 - lean) * s for s in (1.0, -1.0)]
+        angle = max(tips, key=lambda a: float((rotation_about_line(g[:3, 2], tcp, np.radians(a))[:3, :3]
+                                                @ g[:3, 0]) @ x))
+        axis = g[:3, 2].copy()
+        level = rotation_about_line(axis, tcp, np.radians(angle)) @ carried0
+        roll = 90.0 if float((rotation_about_line(level[:3, 0], tcp, np.radians(90.0)) @ level)[2, 2]) > 0 else -90.0
+    else:
+        best: tuple[float, np.ndarray] | None = None
+        for r in (90.0, -90.0):
+            rolled = rotation_about_line(g[:3, 0], tcp, np.radians(r)) @ carried0
+            for z in (np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0])):
+                final = np.column_stack([x, np.cross(z, x), z])
+                rotvec = Rotation.from_matrix(final @ rolled[:3, :3].T).as_rotvec()
+                if best is None or np.linalg.norm(rotvec) < np.linalg.norm(best[1]):
+                    best = (r, rotvec)
+        assert best is not None
+        roll, rotvec = best
+        angle = float(np.degrees(np.linalg.norm(rotvec)))
+        if angle < 1e-6:
+            return None
+        axis = rotvec / np.linalg.norm(rotvec)
 
     def lowest(T: np.ndarray) -> float:  # the object's lowest point with the hand at T
         M = T @ held
         return float((pts @ M[:3, :3].T + M[:3, 3])[:, 2].min())
 
-    rolled_arc = tip_arc(carried0, g[:3, 0], tcp, roll)
-    arc = [carried0, *rolled_arc, *tip_arc(rolled_arc[-1], axis, tcp, angle)]
+    if roll_last:
+        tipped_arc = tip_arc(carried0, axis, tcp, angle)
+        arc = [carried0, *tipped_arc, *tip_arc(tipped_arc[-1], tipped_arc[-1][:3, 0], tcp, roll)]
+    else:
+        rolled_arc = tip_arc(carried0, g[:3, 0], tcp, roll)
+        arc = [carried0, *rolled_arc, *tip_arc(rolled_arc[-1], axis, tcp, angle)]
     lift = max(motion.lift, TIP_CLEARANCE - min(lowest(T) for T in arc))
     up = np.array([0.0, 0.0, lift])
     lifted = g.copy()
@@ -210,11 +233,12 @@ def _leaned(g: np.ndarray, pre: np.ndarray, seated: np.ndarray, name: str, pts: 
     above_pre = pre.copy()
     above_pre[2, 3] = max(above_pre[2, 3], float(pts[:, 2].max()) + motion.clearance)
     lo, hi = rest[:, :2].min(axis=0), rest[:, :2].max(axis=0)
-    tag = "" if float(np.linalg.norm(d)) < 1e-6 else f"@{d[0]:+.2f},{d[1]:+.2f}"
+    tag = ("_roll_last" if roll_last else "") + ("" if float(np.linalg.norm(d)) < 1e-6 else f"@{d[0]:+.2f},{d[1]:+.2f}")
     return LayDownPoses(name=f"{name}_lay_down{tag}", above_pregrasp=above_pre, pregrasp=pre, grasp=g.copy(),
                         lifted=lifted, turned_lifted=tipped_lifted, turned=lowered, retreat=retreat,
                         above_retreat=above, direction=LAY_DOWN, carry=d.copy(), axis=axis,
-                        pivot=tcp + up, tip_deg=angle, roll_deg=roll, lying_center=np.array([*(0.5 * (lo + hi)), 0.0]),
+                        pivot=tcp + up, tip_deg=angle, roll_deg=roll, roll_last=roll_last,
+                        lying_center=np.array([*(0.5 * (lo + hi)), 0.0]),
                         lying_height=top, lying_corners=np.array([[lo[0], lo[1], 0.0], [hi[0], hi[1], 0.0]]))
 
 
