@@ -46,6 +46,8 @@ TIP_CLEARANCE = 0.02
 RELEASE_GAP = 0.004
 #: The hand turned half a turn about its approach: the same parallel grasp with the pads swapped.
 ROLL_HALF = np.diag([1.0, -1.0, -1.0, 1.0])
+#: Yaws (deg) of the level approach a pitched pick's lay-down ends in, from the line from the base (``_leaned``).
+LEVEL_YAWS_DEG = (0.0, 25.0, -25.0)
 #: Degrees between the waypoints of the tip arc (straight lines between them, like the turn's arc).
 TIP_STEP_DEG = 10.0
 
@@ -146,13 +148,14 @@ def lay_down_sequences(grasp: Grasp, xyz: np.ndarray, center: np.ndarray, height
             for flip, tag in ((np.eye(4), ""), (ROLL_HALF, "_rolled")):  # the pads swapped: another wrist branch
                 if pitched(name):  # held, once seated on the pads, as the unpitched grasp holds it
                     args = (poses[name] @ flip, pre @ flip, poses["grasp"] @ flip, name + tag, pts)
-                    for last in (True, False):
-                        seq = _leaned(*args, d, motion, last)
-                        if seq is not None:  # it lies beyond the hand: carried so that it lies centred on its spot
-                            seq = _leaned(*args, d + np.array([*(center[:2] + d[:2] - seq.lying_center[:2]), 0.0]),
-                                          motion, last)
-                        if seq is not None:
-                            out.append(seq)
+                    for yaw in LEVEL_YAWS_DEG:
+                        for last in (True, False):
+                            seq = _leaned(*args, d, motion, last, yaw)
+                            if seq is not None:  # it lies beyond the hand: carried so it lies centred on its spot
+                                shift = np.array([*(center[:2] + d[:2] - seq.lying_center[:2]), 0.0])
+                                seq = _leaned(*args, d + shift, motion, last, yaw)
+                            if seq is not None:
+                                out.append(seq)
                     continue
                 seq = _tipped(grasp, poses[name] @ flip, pre @ flip, name + tag, pts, d, motion)
                 if seq is not None:
@@ -161,7 +164,7 @@ def lay_down_sequences(grasp: Grasp, xyz: np.ndarray, center: np.ndarray, height
 
 
 def _leaned(g: np.ndarray, pre: np.ndarray, seated: np.ndarray, name: str, pts: np.ndarray, d: np.ndarray,
-            motion: TurnMotion, roll_last: bool = False) -> LayDownPoses | None:
+            motion: TurnMotion, roll_last: bool = False, yaw_deg: float = 0.0) -> LayDownPoses | None:
     """The lay-down of a pitched top-down pick ``g`` (``services/grasp/pitch.py``) carried by ``d``: the hand
     rolls 90 degrees about its approach (the grasp line turns across the line from the base), then pitches
     about the grasp line until its approach points horizontally away from the base (the object's top toward
@@ -172,23 +175,28 @@ def _leaned(g: np.ndarray, pre: np.ndarray, seated: np.ndarray, name: str, pts: 
     off the object's sides. ``seated`` is the unpitched grasp: once lifted the object sits on the pads as that
     grasp holds it. ``roll_last``: tip first (about the hand's z, until the approach is level), then roll
     (about the level approach); which of the two orders keeps the wrist on one branch depends on the pick
-    (measured on a registered view: only roll-last did). None when the grasp line is not level when seated."""
+    (measured on a registered view: only roll-last did). ``yaw_deg``: the level approach turned that far
+    from the line from the base (straight along it, the wrist can end at its singularity, joints 4 and 6 in
+    line: measured on a 15 cm box, every order needed a joint jump). None when the grasp line is not level
+    when seated."""
     if abs(float(seated[2, 1])) > 0.2:
         return None
     held = np.linalg.inv(seated)  # the object's standing pose in the hand, once seated
     tcp = g[:3, 3] + d
     out = tcp[:2] / max(float(np.linalg.norm(tcp[:2])), 1e-9)
-    x = np.array([out[0], out[1], 0.0])
+    c, s_ = np.cos(np.radians(yaw_deg)), np.sin(np.radians(yaw_deg))
+    x = np.array([c * out[0] - s_ * out[1], s_ * out[0] + c * out[1], 0.0])
     carried0 = g.copy()
     carried0[:3, 3] += d
     if roll_last:  # about the hand's z until the approach is level, then about the level approach
-        lean = float(np.degrees(np.arccos(np.clip(-g[2, 0], -1.0, 1.0))))  # the approach's angle from straight down
-        tips = [(90.0 - lean) * s for s in (1.0, -1.0)]
-        angle = max(tips, key=lambda a: float((rotation_about_line(g[:3, 2], tcp, np.radians(a))[:3, :3]
-                                                @ g[:3, 0]) @ x))
-        axis = g[:3, 2].copy()
+        # the rotation taking the approach to x by the shortest way, then a roll about x that levels the pads
+        v = np.cross(g[:3, 0], x)
+        axis = v / max(float(np.linalg.norm(v)), 1e-12)
+        angle = float(np.degrees(np.arctan2(np.linalg.norm(v), float(g[:3, 0] @ x))))
         level = rotation_about_line(axis, tcp, np.radians(angle)) @ carried0
-        roll = 90.0 if float((rotation_about_line(level[:3, 0], tcp, np.radians(90.0)) @ level)[2, 2]) > 0 else -90.0
+        # about x by r: y' = cos(r) y + sin(r) z, level when cos(r) y_z + sin(r) z_z = 0 (the nearer of two)
+        roll = float(np.degrees(np.arctan2(-level[2, 1], level[2, 2])))
+        roll = roll - 180.0 * np.sign(roll) if abs(roll) > 90.0 else roll
     else:
         best: tuple[float, np.ndarray] | None = None
         for r in (90.0, -90.0):
@@ -233,7 +241,8 @@ def _leaned(g: np.ndarray, pre: np.ndarray, seated: np.ndarray, name: str, pts: 
     above_pre = pre.copy()
     above_pre[2, 3] = max(above_pre[2, 3], float(pts[:, 2].max()) + motion.clearance)
     lo, hi = rest[:, :2].min(axis=0), rest[:, :2].max(axis=0)
-    tag = ("_roll_last" if roll_last else "") + ("" if float(np.linalg.norm(d)) < 1e-6 else f"@{d[0]:+.2f},{d[1]:+.2f}")
+    tag = ("_roll_last" if roll_last else "") + (f"_yaw{yaw_deg:+g}" if yaw_deg else "")
+    tag += "" if float(np.linalg.norm(d)) < 1e-6 else f"@{d[0]:+.2f},{d[1]:+.2f}"
     return LayDownPoses(name=f"{name}_lay_down{tag}", above_pregrasp=above_pre, pregrasp=pre, grasp=g.copy(),
                         lifted=lifted, turned_lifted=tipped_lifted, turned=lowered, retreat=retreat,
                         above_retreat=above, direction=LAY_DOWN, carry=d.copy(), axis=axis,

@@ -25,6 +25,7 @@ from tests.grasp.shapes import box, table_plane
 from tests.orchestrator.test_recovery import PlanningCell, _cams, _steps
 
 TALL_BOX = (0.0658, 0.109, 0.238)  # m: x, y, height; the generated box that never left view 0
+THIN_WIDE_BOX = (0.054, 0.1584, 0.153)  # another that never did: 5.4 cm thin, 15.8 cm across
 WORKSPACE = np.array([0.60, 0.0, 0.0])
 
 
@@ -67,13 +68,13 @@ def test_a_tall_box_is_tall_and_its_lay_down_tips_it_onto_its_side():
         assert seq.straight_moves(view.center)[-1].target[2, 3] >= seq.lying_height + 0.05  # backs off up
 
 
-def _standing_tall_box(kin, tmp_path, rescans: int):  # noqa: ANN001
+def _standing_tall_box(kin, tmp_path, rescans: int, size: tuple[float, float, float] = TALL_BOX):  # noqa: ANN001
     store = SessionStore(tmp_path)
-    store.save_view(_view(TALL_BOX, WORKSPACE, 0))
+    store.save_view(_view(size, WORKSPACE, 0))
     cell = PlanningCell(np.asarray(SimArmDriver(send=lambda q, o: None).config.initial_q, float), kin)
     acq = Acquisition(cell, store, AcquisitionConfig(views=12))  # type: ignore[arg-type]
     acq.j.update(view=0, state="plan_grasp", centers={"-1": WORKSPACE.tolist(), "0": WORKSPACE.tolist()},
-                 heights={"-1": TALL_BOX[2], "0": TALL_BOX[2]}, rescans={"0": rescans})
+                 heights={"-1": size[2], "0": size[2]}, rescans={"0": rescans})
     return cell, acq
 
 
@@ -104,16 +105,16 @@ def test_a_lay_down_released_restarts_the_views_lying_and_says_so(tmp_path):
 
 
 def test_a_tall_box_thin_along_the_line_from_the_base_has_an_executable_lay_down(kin):
-    """The generated tall box (6.6 cm thin along the line from the base, 10.9 cm across: wider than the gripper
-    opens) at the workspace centre: every grasp across its 6.6 cm closes along the line from the base, so no
-    frontal or top-down chain of it reaches (the approach would lean sideways, which the arm never reaches);
-    the top-down pick pitched 40 degrees away from the base does, and its lay-down (roll, then tip until the
-    approach is level, the object's top toward the base) is executable in full, by the arm's own line checks.
-    (That no turn of it is executable, nor the lay-down of any unpitched grasp, the state machine's test below
-    finds by dry-running them all.)"""
+    """A generated box 5.4 cm thin along the line from the base, 15.8 cm across (wider than the gripper opens),
+    15.3 cm tall, at the workspace centre: every grasp across its 5.4 cm closes along the line from the base,
+    so no frontal or top-down chain of it reaches (the approach would lean sideways, which the arm never
+    reaches); the top-down pick pitched 40 degrees away from the base does, and its lay-down (tip until the
+    approach is level, roll the pads level, the object's top toward the base) is executable in full, by the
+    arm's own line checks. (That no turn of it is executable, nor the lay-down of any unpitched grasp, the
+    state machine's test below finds by dry-running them all.)"""
     from tests.orchestrator.test_turn_reach import _executable
 
-    view = _view(TALL_BOX, WORKSPACE, 0)
+    view = _view(THIN_WIDE_BOX, WORKSPACE, 0)
     plan = plan_grasps(view.cloud.xyz, view.cloud.normals, table_plane(),
                        replace(GraspService.planner_config(), mode="both"))
     grasps = plan.to_messages()
@@ -128,9 +129,10 @@ def test_a_tall_box_thin_along_the_line_from_the_base_has_an_executable_lay_down
     rest = seq.turned @ _held(grasps, seq)  # the object's motion from standing to where it is released
     lying = pts @ rest[:3, :3].T + rest[:3, 3]
     assert float(lying[:, 2].min()) == pytest.approx(0.004, abs=1e-6)  # released just above the table
-    assert float(np.ptp(lying[:, 2])) == pytest.approx(TALL_BOX[1], abs=0.01)  # its 10.9 cm now stands up
-    # its thin side lies across the line from the base: the way a top-down grasp reaches
-    assert float(np.ptp(lying[:, 1])) == pytest.approx(TALL_BOX[0], abs=0.01)
+    assert abs(rest[2, 1]) > 0.99  # its 15.8 cm now stands up: lying on its thin side
+    assert float(lying[:, 2].max()) == pytest.approx(THIN_WIDE_BOX[1] + 0.004, abs=0.01)
+    # its thin side (object x) lies across the line from the base, within the level approach's yaw
+    assert abs(rest[1, 0]) >= np.cos(np.radians(26.0))
     assert np.linalg.norm(seq.lying_center[:2] - WORKSPACE[:2]) < 0.03  # centred where it stood
 
 
@@ -150,7 +152,7 @@ def test_a_tall_box_thin_along_the_line_from_the_base_is_laid_down_and_the_views
     """The same box in the state machine at the view's last chance: no turn, no reposition is executable, so it
     is laid down by the pitched pick, and the views restart at 0 where it lies (it stopped "limit: reach"
     before)."""
-    _, acq = _standing_tall_box(kin, tmp_path, rescans=2)
+    _, acq = _standing_tall_box(kin, tmp_path, rescans=2, size=THIN_WIDE_BOX)
     states = asyncio.run(_steps(acq, 8))
     assert states[-1] == State.SCAN, acq.j.decisions[-5:]
     assert acq.j.laid_down["state"] == "done" and "_pitch" in acq.j.laid_down["pose"]
