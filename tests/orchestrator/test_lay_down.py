@@ -26,6 +26,7 @@ from tests.orchestrator.test_recovery import PlanningCell, _cams, _steps
 
 TALL_BOX = (0.0658, 0.109, 0.238)  # m: x, y, height; the generated box that never left view 0
 THIN_WIDE_BOX = (0.054, 0.1584, 0.153)  # another that never did: 5.4 cm thin, 15.8 cm across
+THIN_TALL_BOX = (0.05, 0.12, 0.22)  # 5 cm thin along the line from the base, 12 cm across, 22 cm tall
 WORKSPACE = np.array([0.60, 0.0, 0.0])
 
 
@@ -147,12 +148,26 @@ def _held(grasps, seq):  # noqa: ANN001, ANN202
     return np.linalg.inv(seated @ ROLL_HALF if "_rolled" in seq.name else seated)
 
 
+def test_a_slab_as_wide_as_it_is_tall_is_not_laid_down_on_its_other_edge(kin, tmp_path):
+    """The 5.4 x 15.8 x 15.3 cm slab: its pitched lay-down is executable, but would leave it lying 15.8 cm
+    tall, no lower than it stands, so it is not tried (measured in a whole MuJoCo acquisition: laid down, it
+    was as far out of reach lying)."""
+    cell, acq = _standing_tall_box(kin, tmp_path, rescans=2, size=THIN_WIDE_BOX)
+    view = acq.store.load_view(0)
+    from services.orchestrator.lay_down_step import try_lay_down
+
+    assert asyncio.run(try_lay_down(acq, 0, view, (np.zeros(3), np.zeros(3)), [])) is None
+    last = acq.j.decisions[-1]
+    assert last["what"] == "no lay-down executable" and last["checks"] == 0 and last["not_lower"] > 0
+    assert not [m for m in cell.log if not m["dry_run"]]  # nothing moved
+
+
 @pytest.mark.slow  # every standing chain is dry-run first (as in a real acquisition): a few minutes, loaded
 def test_a_tall_box_thin_along_the_line_from_the_base_is_laid_down_and_the_views_restart(kin, tmp_path):
-    """The same box in the state machine at the view's last chance: no turn, no reposition is executable, so it
-    is laid down by the pitched pick, and the views restart at 0 where it lies (it stopped "limit: reach"
-    before)."""
-    _, acq = _standing_tall_box(kin, tmp_path, rescans=2, size=THIN_WIDE_BOX)
+    """A 22 cm box thin along the line from the base, 12 cm across, in the state machine at the view's last
+    chance: no turn, no reposition is executable, so it is laid down by the pitched pick (12 cm tall lying),
+    and the views restart at 0 where it lies (such a box stopped "limit: reach" before)."""
+    _, acq = _standing_tall_box(kin, tmp_path, rescans=2, size=THIN_TALL_BOX)
     states = asyncio.run(_steps(acq, 8))
     assert states[-1] == State.SCAN, acq.j.decisions[-5:]
     assert acq.j.laid_down["state"] == "done" and "_pitch" in acq.j.laid_down["pose"]
