@@ -44,6 +44,9 @@ class GripperConfig:
     frontal grasp can go before the hand hits the table."""
     palm_width: float = 0.080
     palm_depth: float = 0.059
+    open_retraction: float = 0.0273
+    """How far the parallel linkage pulls the pads back along the approach when fully open (measured on the
+    URDF linkage with pinocchio; the twin's ``services/sim/gripper.GripperSpec.retraction`` at 0.106 m)."""
 
     def __post_init__(self) -> None:
         _check_positive(self, exclude=("name", "min_opening"))
@@ -152,6 +155,11 @@ class GraspPlannerConfig:
     top_down_offsets_deg: tuple[float, ...] = (15.0, 30.0, 45.0)
     top_down_roll_deg: tuple[float, ...] = (30.0, 45.0)
     """Top-down grasps on a round section also turned about the lying axis by these angles (``roll.py``)."""
+    top_down_pitch_deg: tuple[float, ...] = (35.0, 40.0)
+    """Top-down grasps on anything else also pitched along a grasp line that runs along the line from the
+    base, the approach leaning away from the base by these angles (``pitch.py``): at 0.60 m the arm reaches
+    a 35-40 degree lean (30 was out of reach above a 15 cm box), and the open pads, tilted against a box's
+    faces, clear a 5.4 cm box at 35 degrees with 5 mm to spare, at 40 degrees with 0.5 mm."""
     turn_deg: float = 30.0
     """Turn of the object about the table normal; positive = right-handed about the upward normal
     (counter-clockwise seen from above). The paper turns clockwise: use -30 for that."""
@@ -172,7 +180,8 @@ class GraspPlannerConfig:
 
     def __post_init__(self) -> None:
         _check_positive(self, exclude=("gripper", "mode", "pregrasp_distance", "frontal_offsets_deg",
-                                       "top_down_offsets_deg", "top_down_roll_deg", "turn_deg", "approach_origin",
+                                       "top_down_offsets_deg", "top_down_roll_deg", "top_down_pitch_deg", "turn_deg",
+                                       "approach_origin",
                                        "seed",
                                        "top_down_crop", "cos_beta_offset", "r1_min", "r2_min",
                                        "check_palm", "w1", "w2", "table_clearance", "max_examples"))

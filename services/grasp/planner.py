@@ -33,6 +33,7 @@ from services.grasp.collision import (
 from services.grasp.completion import complete_hidden_sides, horizontal_axes
 from services.grasp.config import GraspPlannerConfig
 from services.grasp.errors import GraspInputError
+from services.grasp.pitch import pitch_poses
 from services.grasp.poses import frontal_rotation, grasp_poses, top_down_rotation
 from services.grasp.ranking import RankedPair, rank_region_pair
 from services.grasp.result import GraspPlan, PlannedGrasp, Rejections
@@ -286,6 +287,10 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
             grasp.poses.update(roll_poses(grasp.poses, R, section[0], cfg.top_down_roll_deg, inp.up, center,
                                           cfg.turn_deg, np.asarray(cfg.approach_origin, float)))
             grasp.metrics["section_radius"] = section[1]
+        elif cfg.top_down_pitch_deg:  # a box: the pitched picks a box thin along the line from the base needs
+            grasp.poses.update(pitch_poses(grasp.poses, R, mid, cfg.top_down_pitch_deg, inp.up,
+                                           np.asarray(cfg.approach_origin, float),
+                                           lambda Rp, m=mid: _open_pads_clear(Rp, m, inp.xyz, cfg)))
         out.append(grasp)
         slots[(axis, source)] = slots.get((axis, source), 0) + 1
     out.sort(key=_order)
@@ -394,6 +399,20 @@ def _object_hits(boxes: dict[str, OrientedBox], xyz: np.ndarray, cfg: GraspPlann
         if n >= cfg.object_collision_min_points:
             return n, name
     return 0, None
+
+
+def _open_pads_clear(R: np.ndarray, mid: np.ndarray, xyz: np.ndarray, cfg: GraspPlannerConfig) -> bool:
+    """Whether the pads of a gripper with rotation ``R``, fully open about ``mid``, stay clear of the object
+    points, at the contacts' level and where the linkage pulls them back as they open
+    (``GripperConfig.open_retraction``): a hand coming in tilted against a box's faces meets them there."""
+    g = cfg.gripper
+    y, x = R[:, 1], R[:, 0]
+    reach = 0.5 * (g.max_opening - cfg.pad_gap)  # pad_boxes puts each pad's inner face pad_gap/2 past its contact
+    for back in (0.0, g.open_retraction):
+        pads = pad_boxes(R, mid + reach * y - back * x, mid - reach * y - back * x, cfg)
+        if _object_hits(dict(zip(("pad_plus", "pad_minus"), pads, strict=True)), xyz, cfg)[0]:
+            return False
+    return True
 
 
 def _make_grasp(kind: str, axis: str, pair: RankedPair, R: np.ndarray, contacts: np.ndarray,

@@ -25,9 +25,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from common.geometry import rotation_about_line
 from common.messages import Grasp
+from services.grasp.pitch import pitched
 from services.orchestrator.config import RelocationConfig, TurnMotion
 from services.orchestrator.planning import ChainMove, TurnPoses, carry_line
 from services.orchestrator.regrasp import relocation_shifts
@@ -44,6 +46,8 @@ TIP_CLEARANCE = 0.02
 RELEASE_GAP = 0.004
 #: The hand turned half a turn about its approach: the same parallel grasp with the pads swapped.
 ROLL_HALF = np.diag([1.0, -1.0, -1.0, 1.0])
+#: Yaws (deg) of the level approach a pitched pick's lay-down ends in, from the line from the base (``_leaned``).
+LEVEL_YAWS_DEG = (0.0, 25.0, -25.0)
 #: Degrees between the waypoints of the tip arc (straight lines between them, like the turn's arc).
 TIP_STEP_DEG = 10.0
 
@@ -62,6 +66,8 @@ class LayDownPoses(TurnPoses):
     lying_center: np.ndarray = field(default_factory=lambda: np.zeros(3))
     lying_height: float = 0.0
     lying_corners: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))  # footprint's lowest, highest
+    roll_deg: float = 0.0  # a turn about the hand's approach through ``pivot`` before the tip (a pitched pick)
+    roll_last: bool = False  # the roll after the tip instead (about the tipped approach)
 
     def straight_moves(self, center: np.ndarray) -> list[ChainMove]:
         """Down to the pre-grasp, approach, lift, carry, tip (in ``TIP_STEP_DEG`` chords), set down,
@@ -73,7 +79,15 @@ class LayDownPoses(TurnPoses):
         carried[:3, 3] += self.carry
         if float(np.linalg.norm(self.carry)) > 1e-6:
             moves += [ChainMove("carry", w, "held") for w in carry_line(self.lifted, carried)]
-        moves += [ChainMove("lay down", w, "held") for w in tip_arc(carried, self.axis, self.pivot, self.tip_deg)]
+        if self.roll_deg and not self.roll_last:
+            rolled = tip_arc(carried, carried[:3, 0], self.pivot, self.roll_deg)
+            moves += [ChainMove("lay down", w, "held") for w in rolled]
+            carried = rolled[-1]
+        tipped = tip_arc(carried, self.axis, self.pivot, self.tip_deg)
+        moves += [ChainMove("lay down", w, "held") for w in tipped]
+        if self.roll_deg and self.roll_last:
+            moves += [ChainMove("lay down", w, "held")
+                      for w in tip_arc(tipped[-1], tipped[-1][:3, 0], self.pivot, self.roll_deg)]
         moves += [ChainMove("set down", self.turned, "held"),
                   ChainMove("retreat", self.retreat, "released"),
                   ChainMove("up", self.above_retreat, "released")]
@@ -119,7 +133,8 @@ def lay_down_sequences(grasp: Grasp, xyz: np.ndarray, center: np.ndarray, height
                        shifts: list[np.ndarray]) -> list[LayDownPoses]:
     """For each of ``grasp``'s angular offsets with a horizontal grasp line and each carry in ``shifts``, the
     chain that tips the object 90 degrees about the grasp line so that the hand ends above it (the approach
-    pointing down), then lowers it until its lowest point is ``RELEASE_GAP`` above the table."""
+    pointing down), then lowers it until its lowest point is ``RELEASE_GAP`` above the table. A pitched pick
+    (``grasp_pitch*``) lays it down the other way (``_leaned``), centred where the carry takes it."""
     poses = {name: p.matrix() for name, p in grasp.poses.items()}
     pts = whole_object(xyz, center)
     out: list[LayDownPoses] = []
@@ -131,10 +146,109 @@ def lay_down_sequences(grasp: Grasp, xyz: np.ndarray, center: np.ndarray, height
             if pre is None:
                 continue
             for flip, tag in ((np.eye(4), ""), (ROLL_HALF, "_rolled")):  # the pads swapped: another wrist branch
+                if pitched(name):  # held, once seated on the pads, as the unpitched grasp holds it
+                    args = (poses[name] @ flip, pre @ flip, poses["grasp"] @ flip, name + tag, pts)
+                    for yaw in LEVEL_YAWS_DEG:
+                        for last in (True, False):
+                            seq = _leaned(*args, d, motion, last, yaw)
+                            if seq is not None:  # it lies beyond the hand: carried so it lies centred on its spot
+                                shift = np.array([*(center[:2] + d[:2] - seq.lying_center[:2]), 0.0])
+                                seq = _leaned(*args, d + shift, motion, last, yaw)
+                            if seq is not None:
+                                out.append(seq)
+                    continue
                 seq = _tipped(grasp, poses[name] @ flip, pre @ flip, name + tag, pts, d, motion)
                 if seq is not None:
                     out.append(seq)
     return out
+
+
+def _leaned(g: np.ndarray, pre: np.ndarray, seated: np.ndarray, name: str, pts: np.ndarray, d: np.ndarray,
+            motion: TurnMotion, roll_last: bool = False, yaw_deg: float = 0.0) -> LayDownPoses | None:
+    """The lay-down of a pitched top-down pick ``g`` (``services/grasp/pitch.py``) carried by ``d``: the hand
+    rolls 90 degrees about its approach (the grasp line turns across the line from the base), then pitches
+    about the grasp line until its approach points horizontally away from the base (the object's top toward
+    the base, its thin side across the line from the base, where a top-down grasp closes the way the arm
+    reaches), both about its TCP: the approach keeps leaning away from the base, the lean the arm reaches,
+    all the way (one rotation straight to the end needed a wrist flip half-way, measured). Then it lowers the
+    object until its lowest point is ``RELEASE_GAP`` above the table and leaves straight up, the pads sliding
+    off the object's sides. ``seated`` is the unpitched grasp: once lifted the object sits on the pads as that
+    grasp holds it. ``roll_last``: tip first (about the hand's z, until the approach is level), then roll
+    (about the level approach); which of the two orders keeps the wrist on one branch depends on the pick
+    (measured on a registered view: only roll-last did). ``yaw_deg``: the level approach turned that far
+    from the line from the base (straight along it, the wrist can end at its singularity, joints 4 and 6 in
+    line: measured on a 15 cm box, every order needed a joint jump). None when the grasp line is not level
+    when seated."""
+    if abs(float(seated[2, 1])) > 0.2:
+        return None
+    held = np.linalg.inv(seated)  # the object's standing pose in the hand, once seated
+    tcp = g[:3, 3] + d
+    out = tcp[:2] / max(float(np.linalg.norm(tcp[:2])), 1e-9)
+    c, s_ = np.cos(np.radians(yaw_deg)), np.sin(np.radians(yaw_deg))
+    x = np.array([c * out[0] - s_ * out[1], s_ * out[0] + c * out[1], 0.0])
+    carried0 = g.copy()
+    carried0[:3, 3] += d
+    if roll_last:  # about the hand's z until the approach is level, then about the level approach
+        # the rotation taking the approach to x by the shortest way, then a roll about x that levels the pads
+        v = np.cross(g[:3, 0], x)
+        axis = v / max(float(np.linalg.norm(v)), 1e-12)
+        angle = float(np.degrees(np.arctan2(np.linalg.norm(v), float(g[:3, 0] @ x))))
+        level = rotation_about_line(axis, tcp, np.radians(angle)) @ carried0
+        # about x by r: y' = cos(r) y + sin(r) z, level when cos(r) y_z + sin(r) z_z = 0 (the nearer of two)
+        roll = float(np.degrees(np.arctan2(-level[2, 1], level[2, 2])))
+        roll = roll - 180.0 * np.sign(roll) if abs(roll) > 90.0 else roll
+    else:
+        best: tuple[float, np.ndarray] | None = None
+        for r in (90.0, -90.0):
+            rolled = rotation_about_line(g[:3, 0], tcp, np.radians(r)) @ carried0
+            for z in (np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0])):
+                final = np.column_stack([x, np.cross(z, x), z])
+                rotvec = Rotation.from_matrix(final @ rolled[:3, :3].T).as_rotvec()
+                if best is None or np.linalg.norm(rotvec) < np.linalg.norm(best[1]):
+                    best = (r, rotvec)
+        assert best is not None
+        roll, rotvec = best
+        angle = float(np.degrees(np.linalg.norm(rotvec)))
+        if angle < 1e-6:
+            return None
+        axis = rotvec / np.linalg.norm(rotvec)
+
+    def lowest(T: np.ndarray) -> float:  # the object's lowest point with the hand at T
+        M = T @ held
+        return float((pts @ M[:3, :3].T + M[:3, 3])[:, 2].min())
+
+    if roll_last:
+        tipped_arc = tip_arc(carried0, axis, tcp, angle)
+        arc = [carried0, *tipped_arc, *tip_arc(tipped_arc[-1], tipped_arc[-1][:3, 0], tcp, roll)]
+    else:
+        rolled_arc = tip_arc(carried0, g[:3, 0], tcp, roll)
+        arc = [carried0, *rolled_arc, *tip_arc(rolled_arc[-1], axis, tcp, angle)]
+    lift = max(motion.lift, TIP_CLEARANCE - min(lowest(T) for T in arc))
+    up = np.array([0.0, 0.0, lift])
+    lifted = g.copy()
+    lifted[2, 3] += lift
+    tipped_lifted = arc[-1].copy()
+    tipped_lifted[:3, 3] += up
+    drop = lowest(tipped_lifted) - RELEASE_GAP
+    lowered = tipped_lifted.copy()
+    lowered[2, 3] -= drop
+    M = lowered @ held
+    rest = pts @ M[:3, :3].T + M[:3, 3]
+    top = float(rest[:, 2].max())
+    retreat = lowered.copy()  # straight up: the open pads slide off the object's sides
+    retreat[2, 3] = max(retreat[2, 3], top + motion.clearance)
+    above = retreat.copy()
+    above_pre = pre.copy()
+    above_pre[2, 3] = max(above_pre[2, 3], float(pts[:, 2].max()) + motion.clearance)
+    lo, hi = rest[:, :2].min(axis=0), rest[:, :2].max(axis=0)
+    tag = ("_roll_last" if roll_last else "") + (f"_yaw{yaw_deg:+g}" if yaw_deg else "")
+    tag += "" if float(np.linalg.norm(d)) < 1e-6 else f"@{d[0]:+.2f},{d[1]:+.2f}"
+    return LayDownPoses(name=f"{name}_lay_down{tag}", above_pregrasp=above_pre, pregrasp=pre, grasp=g.copy(),
+                        lifted=lifted, turned_lifted=tipped_lifted, turned=lowered, retreat=retreat,
+                        above_retreat=above, direction=LAY_DOWN, carry=d.copy(), axis=axis,
+                        pivot=tcp + up, tip_deg=angle, roll_deg=roll, roll_last=roll_last,
+                        lying_center=np.array([*(0.5 * (lo + hi)), 0.0]),
+                        lying_height=top, lying_corners=np.array([[lo[0], lo[1], 0.0], [hi[0], hi[1], 0.0]]))
 
 
 def _tipped(grasp: Grasp, g: np.ndarray, pre: np.ndarray, name: str, pts: np.ndarray, d: np.ndarray,

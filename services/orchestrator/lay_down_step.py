@@ -3,6 +3,9 @@ trying it, and the journal record of it. Functions over an ``Acquisition`` (``ma
 machine so that it only calls in at three points: the last strategy of a turn step, the record at the
 release, and the next state after the release.
 
+A chain that would leave the object lying no lower than it stands is not tried (a slab as wide as it is
+tall, laid on its other edge, is as far out of reach lying).
+
 When: the view's re-scans are used up (the next failure ends the run), no grasp turned the standing object
 even top-down, and no reposition was executable; the object stands markedly taller than it is thin
 (``lay_down.stands_tall``); it was not laid down before. It replaces a certain stop, never a turn.
@@ -21,6 +24,7 @@ import numpy as np
 
 from common.api import ViewResult
 from common.session_folder import view_dir
+from services.grasp.pitch import pitched
 from services.orchestrator.lay_down import (
     LayDownPoses,
     as_recorded,
@@ -63,24 +67,30 @@ async def try_lay_down(acq: Acquisition, k: int, view: ViewResult, box: tuple[np
     acq.decide("laying the object on its side: no grasp turns it standing", height=round(view.height, 4),
                grasps=len(plan.grasps))
     scannable: dict[tuple, bool] = {}
-    checks = 0
+    checks = lower_only = 0
     for d in carry_shifts(view.center, rc):
-        for gi in order:
+        # pitched picks first: they lean away from the base, which the arm reaches wherever it can pick at all
+        chains = sorted(((gi, seq) for gi in order for seq in lay_down_sequences(
+            plan.grasps[gi], view.cloud.xyz, view.center, view.height, acq.config.turn, [d])),
+            key=lambda c: not pitched(c[1].name))
+        for gi, seq in chains:
+            if checks >= rc.max_checks:
+                break
+            if seq.lying_height >= view.height:  # lying no lower than it stands: nothing gained
+                lower_only += 1
+                continue
             grasp = plan.grasps[gi]
-            for seq in lay_down_sequences(grasp, view.cloud.xyz, view.center, view.height, acq.config.turn, [d]):
-                if checks >= rc.max_checks:
-                    break
-                if not await acq._scannable_spot(seq.lying_center, seq.lying_height, scannable):
-                    continue
-                checks += 1
-                acq.j.counters.grasp_checks += 1
-                q_start = await acq._dry_run(k, seq, view.center, float(grasp.width), failures)
-                if q_start is None:
-                    continue
-                outcome = await _execute(acq, k, gi, seq, q_start, box, failures, plan.grasps[gi])
-                if outcome is not None:
-                    return outcome
-    acq.decide("no lay-down executable", checks=checks)
+            if not await acq._scannable_spot(seq.lying_center, seq.lying_height, scannable):
+                continue
+            checks += 1
+            acq.j.counters.grasp_checks += 1
+            q_start = await acq._dry_run(k, seq, view.center, float(grasp.width), failures)
+            if q_start is None:
+                continue
+            outcome = await _execute(acq, k, gi, seq, q_start, box, failures, grasp)
+            if outcome is not None:
+                return outcome
+    acq.decide("no lay-down executable", checks=checks, not_lower=lower_only)
     return None
 
 

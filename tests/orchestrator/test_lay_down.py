@@ -6,6 +6,7 @@ Zenoh), as in test_recovery.py."""
 from __future__ import annotations
 
 import asyncio
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,14 +15,18 @@ from common.api import ViewResult
 from common.messages import PointCloud
 from services.arm.drivers.sim import SimArmDriver
 from services.arm.kinematics import Kinematics
-from services.orchestrator.config import AcquisitionConfig, TurnMotion
-from services.orchestrator.lay_down import LAY_DOWN, lay_down_sequences, stands_tall, whole_object
-from services.orchestrator.machine import Acquisition, AcquisitionFailed, State
+from services.grasp.planner import plan_grasps
+from services.grasp.service import GraspService
+from services.orchestrator.config import AcquisitionConfig, RelocationConfig, TurnMotion
+from services.orchestrator.lay_down import LAY_DOWN, carry_shifts, lay_down_sequences, stands_tall, whole_object
+from services.orchestrator.machine import Acquisition, State
 from services.session_store import SessionStore
 from tests.grasp.shapes import box, table_plane
 from tests.orchestrator.test_recovery import PlanningCell, _cams, _steps
 
 TALL_BOX = (0.0658, 0.109, 0.238)  # m: x, y, height; the generated box that never left view 0
+THIN_WIDE_BOX = (0.054, 0.1584, 0.153)  # another that never did: 5.4 cm thin, 15.8 cm across
+THIN_TALL_BOX = (0.05, 0.12, 0.22)  # 5 cm thin along the line from the base, 12 cm across, 22 cm tall
 WORKSPACE = np.array([0.60, 0.0, 0.0])
 
 
@@ -64,13 +69,13 @@ def test_a_tall_box_is_tall_and_its_lay_down_tips_it_onto_its_side():
         assert seq.straight_moves(view.center)[-1].target[2, 3] >= seq.lying_height + 0.05  # backs off up
 
 
-def _standing_tall_box(kin, tmp_path, rescans: int):  # noqa: ANN001
+def _standing_tall_box(kin, tmp_path, rescans: int, size: tuple[float, float, float] = TALL_BOX):  # noqa: ANN001
     store = SessionStore(tmp_path)
-    store.save_view(_view(TALL_BOX, WORKSPACE, 0))
+    store.save_view(_view(size, WORKSPACE, 0))
     cell = PlanningCell(np.asarray(SimArmDriver(send=lambda q, o: None).config.initial_q, float), kin)
     acq = Acquisition(cell, store, AcquisitionConfig(views=12))  # type: ignore[arg-type]
     acq.j.update(view=0, state="plan_grasp", centers={"-1": WORKSPACE.tolist(), "0": WORKSPACE.tolist()},
-                 heights={"-1": TALL_BOX[2], "0": TALL_BOX[2]}, rescans={"0": rescans})
+                 heights={"-1": size[2], "0": size[2]}, rescans={"0": rescans})
     return cell, acq
 
 
@@ -100,17 +105,74 @@ def test_a_lay_down_released_restarts_the_views_lying_and_says_so(tmp_path):
     assert acq._lying(lying.cloud.xyz, lying.height)  # planned frontal and top-down alike, top-down first
 
 
-@pytest.mark.slow  # every standing chain is dry-run first (as in a real acquisition): about three minutes, loaded
-def test_a_tall_box_that_no_grasp_picks_names_reach_after_trying_to_lay_it_down(kin, tmp_path):
-    """The generated tall box (6.6 cm thin along the line from the base, 10.9 cm across: wider than the gripper
-    opens) at the workspace centre: every grasp across its 6.6 cm approaches from the side, which the arm does
-    not reach; the lay-down is tried at the view's last chance and is not executable either (its pick is the
-    same), so the run ends naming reach and every strategy tried, the lay-down among them."""
-    _, acq = _standing_tall_box(kin, tmp_path, rescans=2)
-    with pytest.raises(AcquisitionFailed, match="limit: reach") as err:
-        asyncio.run(_steps(acq, 8))
-    assert "lay down (not executable)" in str(err.value)
-    assert acq.j.laid_down is None and any(d["what"] == "no lay-down executable" for d in acq.j.decisions)
+def test_a_tall_box_thin_along_the_line_from_the_base_has_an_executable_lay_down(kin):
+    """A generated box 5.4 cm thin along the line from the base, 15.8 cm across (wider than the gripper opens),
+    15.3 cm tall, at the workspace centre: every grasp across its 5.4 cm closes along the line from the base,
+    so no frontal or top-down chain of it reaches (the approach would lean sideways, which the arm never
+    reaches); the top-down pick pitched 40 degrees away from the base does, and its lay-down (tip until the
+    approach is level, roll the pads level, the object's top toward the base) is executable in full, by the
+    arm's own line checks. (That no turn of it is executable, nor the lay-down of any unpitched grasp, the
+    state machine's test below finds by dry-running them all.)"""
+    from tests.orchestrator.test_turn_reach import _executable
+
+    view = _view(THIN_WIDE_BOX, WORKSPACE, 0)
+    plan = plan_grasps(view.cloud.xyz, view.cloud.normals, table_plane(),
+                       replace(GraspService.planner_config(), mode="both"))
+    grasps = plan.to_messages()
+    assert grasps, plan.explain()
+    motion = TurnMotion()
+    lay_downs = [s for g in grasps for s in lay_down_sequences(g, view.cloud.xyz, view.center, view.height, motion,
+                                                                carry_shifts(view.center, RelocationConfig()))]
+    seq = next((s for s in sorted(lay_downs, key=lambda s: "_pitch" not in s.name) if _executable(kin, s)), None)
+    assert seq is not None, [s.name for s in lay_downs]
+    assert "_pitch" in seq.name
+    pts = whole_object(view.cloud.xyz, view.center)
+    rest = seq.turned @ _held(grasps, seq)  # the object's motion from standing to where it is released
+    lying = pts @ rest[:3, :3].T + rest[:3, 3]
+    assert float(lying[:, 2].min()) == pytest.approx(0.004, abs=1e-6)  # released just above the table
+    assert abs(rest[2, 1]) > 0.99  # its 15.8 cm now stands up: lying on its thin side
+    assert float(lying[:, 2].max()) == pytest.approx(THIN_WIDE_BOX[1] + 0.004, abs=0.01)
+    # its thin side (object x) lies across the line from the base, within the level approach's yaw
+    assert abs(rest[1, 0]) >= np.cos(np.radians(26.0))
+    assert np.linalg.norm(seq.lying_center[:2] - WORKSPACE[:2]) < 0.03  # centred where it stood
+
+
+def _held(grasps, seq):  # noqa: ANN001, ANN202
+    """Inverse of the unpitched grasp pose of the pitched pick ``seq`` (the pads swapped for a rolled one): once
+    seated on the pads the object is held as that grasp holds it."""
+    from services.orchestrator.lay_down import ROLL_HALF
+
+    g = next(g for g in grasps if any(np.allclose(seq.grasp, p.matrix() @ f) for p in g.poses.values()
+                                      for f in (np.eye(4), ROLL_HALF)))
+    seated = g.poses["grasp"].matrix()
+    return np.linalg.inv(seated @ ROLL_HALF if "_rolled" in seq.name else seated)
+
+
+def test_a_slab_as_wide_as_it_is_tall_is_not_laid_down_on_its_other_edge(kin, tmp_path):
+    """The 5.4 x 15.8 x 15.3 cm slab: its pitched lay-down is executable, but would leave it lying 15.8 cm
+    tall, no lower than it stands, so it is not tried (measured in a whole MuJoCo acquisition: laid down, it
+    was as far out of reach lying)."""
+    cell, acq = _standing_tall_box(kin, tmp_path, rescans=2, size=THIN_WIDE_BOX)
+    view = acq.store.load_view(0)
+    from services.orchestrator.lay_down_step import try_lay_down
+
+    assert asyncio.run(try_lay_down(acq, 0, view, (np.zeros(3), np.zeros(3)), [])) is None
+    last = acq.j.decisions[-1]
+    assert last["what"] == "no lay-down executable" and last["checks"] == 0 and last["not_lower"] > 0
+    assert not [m for m in cell.log if not m["dry_run"]]  # nothing moved
+
+
+@pytest.mark.slow  # every standing chain is dry-run first (as in a real acquisition): a few minutes, loaded
+def test_a_tall_box_thin_along_the_line_from_the_base_is_laid_down_and_the_views_restart(kin, tmp_path):
+    """A 22 cm box thin along the line from the base, 12 cm across, in the state machine at the view's last
+    chance: no turn, no reposition is executable, so it is laid down by the pitched pick (12 cm tall lying),
+    and the views restart at 0 where it lies (such a box stopped "limit: reach" before)."""
+    _, acq = _standing_tall_box(kin, tmp_path, rescans=2, size=THIN_TALL_BOX)
+    states = asyncio.run(_steps(acq, 8))
+    assert states[-1] == State.SCAN, acq.j.decisions[-5:]
+    assert acq.j.laid_down["state"] == "done" and "_pitch" in acq.j.laid_down["pose"]
+    assert acq.view == 0 and acq.j.counters.lay_downs == 1
+    assert "laid on its side" in acq._recoveries_tried(0)
 
 
 def test_a_lay_down_finished_before_a_restart_is_recorded_not_repeated(tmp_path):
