@@ -2,8 +2,10 @@
 
 1. **sequence variants** (``variants``): each imported (``objscan import``: turns estimated or a step given,
    solved over the view graph with the loop) then reconstructed (``objscan reconstruct``), and judged on
-   itself: ``loop_deg`` (the model's loop closure, all pair transforms composed), ``worst_view_agreement``
-   (of a view's points with another view's point within 10 mm, the share within 3 mm; the worst view),
+   itself: ``loop_deg`` (the model's loop closure, all pair transforms composed; when the model set a pair or
+   a view aside, the loop over the views it kept, re-measured on them as posed: ``real_loop.py``; None when two
+   kept neighbours share too little to measure), ``worst_view_agreement`` (of a kept view's points with
+   another kept view's point within 10 mm, the share within 3 mm; the worst view),
    ``status``: ``closed`` (loop <= 3 deg and every view >= 80 %), ``unsure`` (the import said so, with the
    reason; its model must not be accepted), ``missed`` (neither: a failure), ``refused`` (too few usable
    frames). The variants:
@@ -43,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.real_loop import kept_views, model_loop
 from common.session_folder import MODEL_FILE
 
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
@@ -90,8 +93,10 @@ def run_sequence(name: str, source: Path, intrinsics: str | None, quick: bool, o
     if "error" in model:
         row.update(loop_deg=None, worst_view_agreement=None, error=model["error"])
     else:
-        posed = []
+        posed, kept = [], set(kept_views(model))  # a view the model left out is not in it: not judged
         for k, T in zip(model["views_used"], model["T_model_view"], strict=True):
+            if k not in kept:
+                continue
             pcd = o3d.io.read_point_cloud(str(model_dir / "views" / f"view_{k:02d}.ply")).voxel_down_sample(0.002)
             T = np.asarray(T)
             posed.append(np.asarray(pcd.points) @ T[:3, :3].T + T[:3, 3])
@@ -99,8 +104,9 @@ def run_sequence(name: str, source: Path, intrinsics: str | None, quick: bool, o
         paths: dict[str, int] = {}
         for e in model["edges"]:
             paths[e["path"]] = paths.get(e["path"], 0) + 1
-        row.update(loop_deg=model["loop_closure"]["rotation_deg"],
-                   loop_translation_mm=model["loop_closure"]["translation_mm"],
+        loop = model_loop(model, model_dir / "views")
+        row.update(loop_deg=loop["rotation_deg"], loop_translation_mm=loop["translation_mm"], loop_over=loop["over"],
+                   **{k: loop[k] for k in ("set_aside", "gaps", "all_pairs_deg") if k in loop},
                    worst_view_agreement=min(scores) if scores else None,
                    mean_view_agreement=float(np.mean(scores)) if scores else None,
                    agreement_per_view=[round(a, 3) for a in scores], edge_paths=paths,
@@ -123,6 +129,10 @@ def judge(row: dict[str, Any]) -> tuple[str, str]:
         return "unsure", "; ".join(row.get("import_reasons") or ["unsure"])
     if loop is not None and worst is not None and loop <= LOOP_DEG and worst >= AGREEMENT:
         return "closed", f"loop {loop:.2f} deg, worst view {worst:.1%}"
+    if loop is None and row.get("gaps"):
+        where = ", ".join(f"{g['from']} -> {g['to']} (overlap {g['overlap']:.2f})" for g in row["gaps"])
+        return "missed", (f"the loop over the views the model kept is not measured: {where} share too little; "
+                          "only the full-turn constraint places them")
     if loop is None:
         return "missed", f"no model: {row.get('error', {}).get('message', '')}"
     return "missed", f"loop {loop:.2f} deg (<= {LOOP_DEG:g}), worst view {worst:.1%} (>= {AGREEMENT:.0%})"
