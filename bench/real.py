@@ -3,7 +3,7 @@
 1. **sequence variants** (``variants``): each imported (``objscan import``: turns estimated or a step given,
    solved over the view graph with the loop) then reconstructed (``objscan reconstruct``), and judged on
    itself: ``loop_deg`` (the model's loop closure, all pair transforms composed; when the model set a pair or
-   a view aside, the loop over the views it kept, re-measured on them as posed: ``real_loop.py``; None when two
+   a view aside, the loop over the views it kept, re-measured on them as posed: ``_real_loop.py``; None when two
    kept neighbours share too little to measure), ``worst_view_agreement`` (of a kept view's points with
    another kept view's point within 10 mm, the share within 3 mm; the worst view),
    ``status``: ``closed`` (loop <= 3 deg and every view >= 80 %), ``unsure`` (the import said so, with the
@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.real_loop import kept_views, model_loop
+from bench._real_loop import kept_views, model_loop
 from common.session_folder import MODEL_FILE
 
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
