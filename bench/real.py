@@ -58,12 +58,11 @@ OUT = Path("/tmp/objscan_bench_real")
 def run_sequence(name: str, source: Path, intrinsics: str | None, quick: bool, out_root: Path = OUT,
                  picture: bool = False, **import_options: Any) -> dict[str, Any]:
     """Import ``source``, reconstruct it, and judge the model on itself (see the module doc)."""
-    import open3d as o3d
 
     from services.importer.errors import ImportError_
     from services.importer.session import ImportConfig, import_sequence
     from services.importer.sources import parse_intrinsics
-    from services.registration.api import DynamicConfig, reconstruct, view_agreement
+    from services.registration.api import DynamicConfig, reconstruct
 
     session, model_dir = out_root / f"{name}_session", out_root / f"{name}_model"
     shutil.rmtree(session, ignore_errors=True)
@@ -93,31 +92,41 @@ def run_sequence(name: str, source: Path, intrinsics: str | None, quick: bool, o
     if "error" in model:
         row.update(loop_deg=None, worst_view_agreement=None, error=model["error"])
     else:
-        posed, kept = [], set(kept_views(model))  # a view the model left out is not in it: not judged
-        for k, T in zip(model["views_used"], model["T_model_view"], strict=True):
-            if k not in kept:
-                continue
-            pcd = o3d.io.read_point_cloud(str(model_dir / "views" / f"view_{k:02d}.ply")).voxel_down_sample(0.002)
-            T = np.asarray(T)
-            posed.append(np.asarray(pcd.points) @ T[:3, :3].T + T[:3, 3])
-        scores = [a["agreement"] for a in view_agreement(posed) if a["agreement"] is not None]
-        paths: dict[str, int] = {}
-        for e in model["edges"]:
-            paths[e["path"]] = paths.get(e["path"], 0) + 1
-        loop = model_loop(model, model_dir / "views")
-        row.update(loop_deg=loop["rotation_deg"], loop_translation_mm=loop["translation_mm"], loop_over=loop["over"],
-                   **{k: loop[k] for k in ("set_aside", "gaps", "all_pairs_deg") if k in loop},
-                   worst_view_agreement=min(scores) if scores else None,
-                   mean_view_agreement=float(np.mean(scores)) if scores else None,
-                   agreement_per_view=[round(a, 3) for a in scores], edge_paths=paths,
-                   configuration=model["configuration"], min_posed_fitness=model["consistency"]["min_posed_fitness"],
-                   model_points=model["points"])
+        row.update(model_figures(model, model_dir))
         if picture:
             row["picture"] = _picture(model_dir / MODEL_FILE, model_dir / "model.png").name
     row["status"], row["reason"] = judge(row)
     row.update(import_seconds=round(t_import, 1), total_seconds=round(time.perf_counter() - t0, 1),
                session=session.name, imported=imp)  # by name: the folder is this machine's
     return row
+
+
+def model_figures(model: dict[str, Any], model_dir: Path) -> dict[str, Any]:
+    """A reconstructed model judged on itself: its loop (``_real_loop.model_loop``: over the views it kept) and
+    how well each kept view agrees with the others (``view_agreement``), from ``model_dir/views``."""
+    import open3d as o3d
+
+    from services.registration.api import view_agreement
+
+    posed, kept = [], set(kept_views(model))  # a view the model left out is not in it: not judged
+    for k, T in zip(model["views_used"], model["T_model_view"], strict=True):
+        if k not in kept:
+            continue
+        pcd = o3d.io.read_point_cloud(str(model_dir / "views" / f"view_{k:02d}.ply")).voxel_down_sample(0.002)
+        T = np.asarray(T)
+        posed.append(np.asarray(pcd.points) @ T[:3, :3].T + T[:3, 3])
+    scores = [a["agreement"] for a in view_agreement(posed) if a["agreement"] is not None]
+    paths: dict[str, int] = {}
+    for e in model["edges"]:
+        paths[e["path"]] = paths.get(e["path"], 0) + 1
+    loop = model_loop(model, model_dir / "views")
+    return dict(loop_deg=loop["rotation_deg"], loop_translation_mm=loop["translation_mm"], loop_over=loop["over"],
+                **{k: loop[k] for k in ("set_aside", "gaps", "all_pairs_deg") if k in loop},
+                worst_view_agreement=min(scores) if scores else None,
+                mean_view_agreement=float(np.mean(scores)) if scores else None,
+                agreement_per_view=[round(a, 3) for a in scores], edge_paths=paths,
+                configuration=model["configuration"], min_posed_fitness=model["consistency"]["min_posed_fitness"],
+                model_points=model["points"])
 
 
 def judge(row: dict[str, Any]) -> tuple[str, str]:
