@@ -164,6 +164,11 @@ def shortfalls(outcome: ConfigurationOutcome, criteria: AcceptCriteria) -> list[
         kept = [f for f in o.fitness if f == f]
         if kept and min(kept) < criteria.min_posed_fitness:
             out.append(f"a kept view fits the others at {min(kept):.3f} < {criteria.min_posed_fitness:g}")
+        gaps = [g for g in outcome.consistency.get("unmeasured_gaps", []) if g["overlap"] < criteria.min_posed_overlap]
+        if gaps:  # the loop was waived and nothing else measured these turns (combine.unmeasured_gaps)
+            where = ", ".join(f"{g['from']} -> {g['to']} (overlap {g['overlap']:.2f})" for g in gaps)
+            out.append(f"the turn between kept views {where} is not measured: no kept pair links them and they "
+                       f"share under {criteria.min_posed_overlap:g}; only the loop's full turn places them")
     if outcome.turns is not None:  # whatever else was waived: stacked views fit each other and close the loop
         out.extend(outcome.turns.misses)
     c = outcome.consistency
