@@ -2,8 +2,10 @@
 
 1. **sequence variants** (``variants``): each imported (``objscan import``: turns estimated or a step given,
    solved over the view graph with the loop) then reconstructed (``objscan reconstruct``), and judged on
-   itself: ``loop_deg`` (the model's loop closure, all pair transforms composed), ``worst_view_agreement``
-   (of a view's points with another view's point within 10 mm, the share within 3 mm; the worst view),
+   itself: ``loop_deg`` (the model's loop closure, all pair transforms composed; when the model set a pair or
+   a view aside, the loop over the views it kept, re-measured on them as posed: ``_real_loop.py``; None when two
+   kept neighbours share too little to measure), ``worst_view_agreement`` (of a kept view's points with
+   another kept view's point within 10 mm, the share within 3 mm; the worst view),
    ``status``: ``closed`` (loop <= 3 deg and every view >= 80 %), ``unsure`` (the import said so, with the
    reason; its model must not be accepted), ``missed`` (neither: a failure), ``refused`` (too few usable
    frames). The variants:
@@ -43,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from bench._real_loop import kept_views, model_loop
 from common.session_folder import MODEL_FILE
 
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
@@ -55,12 +58,11 @@ OUT = Path("/tmp/objscan_bench_real")
 def run_sequence(name: str, source: Path, intrinsics: str | None, quick: bool, out_root: Path = OUT,
                  picture: bool = False, **import_options: Any) -> dict[str, Any]:
     """Import ``source``, reconstruct it, and judge the model on itself (see the module doc)."""
-    import open3d as o3d
 
     from services.importer.errors import ImportError_
     from services.importer.session import ImportConfig, import_sequence
     from services.importer.sources import parse_intrinsics
-    from services.registration.api import DynamicConfig, reconstruct, view_agreement
+    from services.registration.api import DynamicConfig, reconstruct
 
     session, model_dir = out_root / f"{name}_session", out_root / f"{name}_model"
     shutil.rmtree(session, ignore_errors=True)
@@ -90,28 +92,41 @@ def run_sequence(name: str, source: Path, intrinsics: str | None, quick: bool, o
     if "error" in model:
         row.update(loop_deg=None, worst_view_agreement=None, error=model["error"])
     else:
-        posed = []
-        for k, T in zip(model["views_used"], model["T_model_view"], strict=True):
-            pcd = o3d.io.read_point_cloud(str(model_dir / "views" / f"view_{k:02d}.ply")).voxel_down_sample(0.002)
-            T = np.asarray(T)
-            posed.append(np.asarray(pcd.points) @ T[:3, :3].T + T[:3, 3])
-        scores = [a["agreement"] for a in view_agreement(posed) if a["agreement"] is not None]
-        paths: dict[str, int] = {}
-        for e in model["edges"]:
-            paths[e["path"]] = paths.get(e["path"], 0) + 1
-        row.update(loop_deg=model["loop_closure"]["rotation_deg"],
-                   loop_translation_mm=model["loop_closure"]["translation_mm"],
-                   worst_view_agreement=min(scores) if scores else None,
-                   mean_view_agreement=float(np.mean(scores)) if scores else None,
-                   agreement_per_view=[round(a, 3) for a in scores], edge_paths=paths,
-                   configuration=model["configuration"], min_posed_fitness=model["consistency"]["min_posed_fitness"],
-                   model_points=model["points"])
+        row.update(model_figures(model, model_dir))
         if picture:
             row["picture"] = _picture(model_dir / MODEL_FILE, model_dir / "model.png").name
     row["status"], row["reason"] = judge(row)
     row.update(import_seconds=round(t_import, 1), total_seconds=round(time.perf_counter() - t0, 1),
                session=session.name, imported=imp)  # by name: the folder is this machine's
     return row
+
+
+def model_figures(model: dict[str, Any], model_dir: Path) -> dict[str, Any]:
+    """A reconstructed model judged on itself: its loop (``_real_loop.model_loop``: over the views it kept) and
+    how well each kept view agrees with the others (``view_agreement``), from ``model_dir/views``."""
+    import open3d as o3d
+
+    from services.registration.api import view_agreement
+
+    posed, kept = [], set(kept_views(model))  # a view the model left out is not in it: not judged
+    for k, T in zip(model["views_used"], model["T_model_view"], strict=True):
+        if k not in kept:
+            continue
+        pcd = o3d.io.read_point_cloud(str(model_dir / "views" / f"view_{k:02d}.ply")).voxel_down_sample(0.002)
+        T = np.asarray(T)
+        posed.append(np.asarray(pcd.points) @ T[:3, :3].T + T[:3, 3])
+    scores = [a["agreement"] for a in view_agreement(posed) if a["agreement"] is not None]
+    paths: dict[str, int] = {}
+    for e in model["edges"]:
+        paths[e["path"]] = paths.get(e["path"], 0) + 1
+    loop = model_loop(model, model_dir / "views")
+    return dict(loop_deg=loop["rotation_deg"], loop_translation_mm=loop["translation_mm"], loop_over=loop["over"],
+                **{k: loop[k] for k in ("set_aside", "gaps", "all_pairs_deg") if k in loop},
+                worst_view_agreement=min(scores) if scores else None,
+                mean_view_agreement=float(np.mean(scores)) if scores else None,
+                agreement_per_view=[round(a, 3) for a in scores], edge_paths=paths,
+                configuration=model["configuration"], min_posed_fitness=model["consistency"]["min_posed_fitness"],
+                model_points=model["points"])
 
 
 def judge(row: dict[str, Any]) -> tuple[str, str]:
@@ -123,6 +138,10 @@ def judge(row: dict[str, Any]) -> tuple[str, str]:
         return "unsure", "; ".join(row.get("import_reasons") or ["unsure"])
     if loop is not None and worst is not None and loop <= LOOP_DEG and worst >= AGREEMENT:
         return "closed", f"loop {loop:.2f} deg, worst view {worst:.1%}"
+    if loop is None and row.get("gaps"):
+        where = ", ".join(f"{g['from']} -> {g['to']} (overlap {g['overlap']:.2f})" for g in row["gaps"])
+        return "missed", (f"the loop over the views the model kept is not measured: {where} share too little; "
+                          "only the full-turn constraint places them")
     if loop is None:
         return "missed", f"no model: {row.get('error', {}).get('message', '')}"
     return "missed", f"loop {loop:.2f} deg (<= {LOOP_DEG:g}), worst view {worst:.1%} (>= {AGREEMENT:.0%})"

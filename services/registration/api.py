@@ -197,14 +197,17 @@ def with_turn_accuracy(config: dict, turn_accuracy_deg: float | None) -> dict:
 def session_dynamic_config(session_data: dict, config: DynamicConfig | None = None) -> DynamicConfig:
     """The dynamic stage's config for a recorded session (``session.json``): without ``config``, the
     default with the session's stated turn accuracy (as ``with_turn_accuracy`` gives a live scan's request);
-    and a fixed camera's views differ by a turn only (``pair.turn_only``) and are judged on what neighbours
-    share (``accept.judge_overlap``), unless ``config`` says otherwise."""
+    and a fixed camera's views differ by a turn only (``pair.turn_only``), are judged on what neighbours
+    share (``accept.judge_overlap``) and its loop's displacement on its own noise
+    (``accept.loop_translation_from_noise``), unless ``config`` says otherwise."""
     cfg = config or dynamic_config(with_turn_accuracy({}, session_data.get("turn_accuracy_deg")))
     fixed = session_data.get("camera") == "fixed"
     if cfg.pair.turn_only is None:  # a fixed camera sees one table: every view differs by a turn (pair.py)
         cfg = replace(cfg, pair=replace(cfg.pair, turn_only=fixed))
     if cfg.accept.judge_overlap is None:  # a fixed camera sees the object from the side: pairs judged on overlap
         cfg = replace(cfg, accept=replace(cfg.accept, judge_overlap=fixed))
+    if cfg.accept.loop_translation_from_noise is None:  # a fixed camera's loop: judged on its own noise
+        cfg = replace(cfg, accept=replace(cfg.accept, loop_translation_from_noise=fixed))
     return cfg
 
 

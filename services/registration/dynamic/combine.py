@@ -177,3 +177,30 @@ def pairwise_consistency(prep: Prepared, poses: list[np.ndarray], results: list[
             "mean_posed_rmse_mm": float(np.mean(rmse)),
             "posed_overlap": overlap, "posed_agreement": agree,
             "min_posed_overlap": float(np.min(overlap)), "min_posed_agreement": float(np.min(agree))}
+
+
+def unmeasured_gaps(prep: Prepared, poses: list[np.ndarray], kept_edges: list[PairResult], kept: list[int],
+                    cfg: CombineConfig) -> list[dict]:
+    """Consecutive kept views (round the loop) that no kept pair links and that share too little as posed.
+
+    Why: when a pair or a view is set aside, the loop composition no longer judges the poses, and the pose
+    graph places the views on either side of what was set aside through the rest of the loop. Where those two
+    views still overlap, their posed agreement vouches for the placement; where they do not (a box's views 76
+    degrees apart once a view between them is left out), nothing measured the turn between them: only the
+    full-turn constraint placed them. Returned with their overlap (share of the first view's points within
+    ``overlap_distance`` of the second's, as posed) for ``AcceptCriteria.min_posed_overlap`` to judge.
+    """
+    ring = sorted(kept)
+    if len(ring) < 2:
+        return []
+    linked = {frozenset((r.source_view, r.target_view)) for r in kept_edges}
+    out = []
+    for a, b in zip(ring, ring[1:] + ring[:1], strict=True):
+        if a == b or frozenset((a, b)) in linked:
+            continue
+        s = _posed(prep, a, poses[a], cfg.consistency_voxel)
+        t = cKDTree(_posed(prep, b, poses[b], cfg.consistency_voxel).xyz.astype(np.float64))
+        d, _ = t.query(s.xyz.astype(np.float64), k=1, distance_upper_bound=cfg.overlap_distance)
+        out.append({"from": prep.views[a].index, "to": prep.views[b].index,
+                    "overlap": round(float(np.isfinite(d).mean()) if len(d) else 0.0, 4)})
+    return out

@@ -16,6 +16,7 @@ is high; ``all`` runs all four and takes the best score. Either way the reason i
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -40,7 +41,13 @@ class AcceptCriteria:
     """When the staged choice may stop: the loop closes and every neighbour fits as posed."""
 
     max_loop_rotation_deg: float = 5.0  # 12 edges of ~0.5-1° error each add up to a few degrees
-    max_loop_translation_mm: float = 5.0
+    max_loop_translation_mm: float = 5.0  # an arm's scan (12 views); a fixed camera's: from its noise, below
+    # Judge the loop's displacement against the session's own noise instead of ``max_loop_translation_mm``
+    # (``loop_translation_gate_mm``; None: the session decides, ``api.session_dynamic_config``: a fixed camera
+    # does). Its sequences run 8-24 pairs of a sensor whose noise grows with the square of the distance
+    # (a D415 at 0.4 m, a PrimeSense at 1 m: 1.4-1.6 mm of posed RMSE), which one millimetre figure cannot hold.
+    loop_translation_from_noise: bool | None = None
+    loop_noise_sigmas: float = 3.0  # a loop open by more than this many random-walk sigmas is a wrong pair
     min_posed_fitness: float = 0.6
     # a view left out opens a 60-degree gap; two still leave every side seen, more is not a full model
     max_views_left_out: int = 2
@@ -106,6 +113,27 @@ def consistency_score(loop: dict, consistency: dict, outliers: OutlierOutcome | 
     return 0.5 * consistency["mean_posed_fitness"] + 0.5 * consistency["min_posed_fitness"] - penalty
 
 
+def loop_translation_gate_mm(outcome: ConfigurationOutcome, criteria: AcceptCriteria) -> float:
+    """The largest loop displacement (mm) that noise explains, or the fixed gate when not judged on noise.
+
+    Why this figure: each pair places its source view on its target to within the point noise the two
+    show once posed (their inlier RMSE: the sensor's noise at that distance, as the session measures it,
+    the median over the loop's pairs so one bad pair cannot widen it). ``n`` pairs composed around the loop
+    add such independent errors as a random walk, ``sqrt(n)`` x noise; beyond ``loop_noise_sigmas`` of that
+    the loop is open by more than noise, i.e. a pair is wrong. The pose graph then spreads what is left over
+    the ``n`` edges, a fraction of the noise each.
+    """
+    if not criteria.loop_translation_from_noise:
+        return criteria.max_loop_translation_mm
+    rmse = [x for x in outcome.consistency.get("posed_rmse_mm") or [] if math.isfinite(x)]
+    if not rmse or not getattr(outcome, "results", None):  # no per-pair figures (a summary): the fixed gate
+        return criteria.max_loop_translation_mm
+    rmse.sort()
+    mid = len(rmse) // 2
+    noise = rmse[mid] if len(rmse) % 2 else 0.5 * (rmse[mid - 1] + rmse[mid])
+    return criteria.loop_noise_sigmas * math.sqrt(len(outcome.results)) * noise
+
+
 def acceptable(outcome: ConfigurationOutcome, criteria: AcceptCriteria) -> bool:
     return not shortfalls(outcome, criteria)
 
@@ -121,8 +149,10 @@ def shortfalls(outcome: ConfigurationOutcome, criteria: AcceptCriteria) -> list[
     if not outcome.loop_waived:
         if not rot <= criteria.max_loop_rotation_deg:
             out.append(f"loop closure {rot:.2f} deg > {criteria.max_loop_rotation_deg:g} deg")
-        if not trans <= criteria.max_loop_translation_mm:
-            out.append(f"loop closure {trans:.1f} mm > {criteria.max_loop_translation_mm:g} mm")
+        gate = loop_translation_gate_mm(outcome, criteria)
+        if not trans <= gate:
+            noise = " (the noise's random walk over the loop)" if criteria.loop_translation_from_noise else ""
+            out.append(f"loop closure {trans:.1f} mm > {gate:.3g} mm{noise}")
     else:
         o = outcome.outliers
         if o.no_majority:
@@ -134,6 +164,11 @@ def shortfalls(outcome: ConfigurationOutcome, criteria: AcceptCriteria) -> list[
         kept = [f for f in o.fitness if f == f]
         if kept and min(kept) < criteria.min_posed_fitness:
             out.append(f"a kept view fits the others at {min(kept):.3f} < {criteria.min_posed_fitness:g}")
+        gaps = [g for g in outcome.consistency.get("unmeasured_gaps", []) if g["overlap"] < criteria.min_posed_overlap]
+        if gaps:  # the loop was waived and nothing else measured these turns (combine.unmeasured_gaps)
+            where = ", ".join(f"{g['from']} -> {g['to']} (overlap {g['overlap']:.2f})" for g in gaps)
+            out.append(f"the turn between kept views {where} is not measured: no kept pair links them and they "
+                       f"share under {criteria.min_posed_overlap:g}; only the loop's full turn places them")
     if outcome.turns is not None:  # whatever else was waived: stacked views fit each other and close the loop
         out.extend(outcome.turns.misses)
     c = outcome.consistency
