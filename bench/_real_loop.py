@@ -26,8 +26,7 @@ import numpy as np
 import open3d as o3d
 
 from common.geometry import rotation_angle_deg
-from services.registration.dynamic.preprocess import prerotation, stacking_frame
-from services.registration.dynamic.views import view_center
+from services.registration.api import prerotation, stacking_frame, view_center
 
 reg = o3d.pipelines.registration
 
