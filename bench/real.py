@@ -3,8 +3,9 @@
 1. **sequence variants** (``variants``): each imported (``objscan import``: turns estimated or a step given,
    solved over the view graph with the loop) then reconstructed (``objscan reconstruct``), and judged on
    itself: ``loop_deg`` (the model's loop closure, all pair transforms composed; when the model set a pair or
-   a view aside, the loop over the views it kept, re-measured on them as posed: ``_real_loop.py``; None when two
-   kept neighbours share too little to measure), ``worst_view_agreement`` (of a kept view's points with
+   a view aside, the loop over the views it kept: the pairs it kept, and ICP of the views as posed only where no
+   kept pair links two kept neighbours, ``_real_loop.py``; None when such neighbours share too little to
+   measure), ``worst_view_agreement`` (of a kept view's points with
    another kept view's point within 10 mm, the share within 3 mm; the worst view),
    ``status``: ``closed`` (loop <= 3 deg and every view >= 80 %), ``unsure`` (the import said so, with the
    reason; its model must not be accepted), ``missed`` (neither: a failure), ``refused`` (too few usable
@@ -92,7 +93,7 @@ def run_sequence(name: str, source: Path, intrinsics: str | None, quick: bool, o
     if "error" in model:
         row.update(loop_deg=None, worst_view_agreement=None, error=model["error"])
     else:
-        row.update(model_figures(model, model_dir))
+        row.update(model_figures(model, model_dir, report.get("views")))
         if picture:
             row["picture"] = _picture(model_dir / MODEL_FILE, model_dir / "model.png").name
     row["status"], row["reason"] = judge(row)
@@ -101,9 +102,10 @@ def run_sequence(name: str, source: Path, intrinsics: str | None, quick: bool, o
     return row
 
 
-def model_figures(model: dict[str, Any], model_dir: Path) -> dict[str, Any]:
-    """A reconstructed model judged on itself: its loop (``_real_loop.model_loop``: over the views it kept) and
-    how well each kept view agrees with the others (``view_agreement``), from ``model_dir/views``."""
+def model_figures(model: dict[str, Any], model_dir: Path, views: list[dict[str, Any]] | None = None) -> dict[str, Any]:
+    """A reconstructed model judged on itself: its loop (``_real_loop.model_loop``: over the views it kept, with
+    the reconstruct report's per-view entries ``views``) and how well each kept view agrees with the others
+    (``view_agreement``), from ``model_dir/views``."""
     import open3d as o3d
 
     from services.registration.api import view_agreement
@@ -119,9 +121,9 @@ def model_figures(model: dict[str, Any], model_dir: Path) -> dict[str, Any]:
     paths: dict[str, int] = {}
     for e in model["edges"]:
         paths[e["path"]] = paths.get(e["path"], 0) + 1
-    loop = model_loop(model, model_dir / "views")
+    loop = model_loop(model, model_dir / "views", views)
     return dict(loop_deg=loop["rotation_deg"], loop_translation_mm=loop["translation_mm"], loop_over=loop["over"],
-                **{k: loop[k] for k in ("set_aside", "gaps", "all_pairs_deg") if k in loop},
+                **{k: loop[k] for k in ("set_aside", "gaps", "all_pairs_deg", "steps") if k in loop},
                 worst_view_agreement=min(scores) if scores else None,
                 mean_view_agreement=float(np.mean(scores)) if scores else None,
                 agreement_per_view=[round(a, 3) for a in scores], edge_paths=paths,

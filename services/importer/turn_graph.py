@@ -395,6 +395,7 @@ def solve_turns(n: int, edges: list[Edge], closing: Edge | None, direction: str,
             k = int(np.argmax(solved))
             reasons.append(f"the solved turns are uneven: {solved[k]:.0f} deg at pair {k} -> {(k + 1) % n} while "
                            f"the median is {np.median(solved):.0f} deg (the loop's missing turn put on few pairs)")
+        reasons += unmeasured_turns(n, sol, turns + [closing_turn or 0.0], cfg)
     if step_deg is None:
         amb = sum(1 for p in unsure if "look-alike" in p["why"])
         if amb > cfg.max_ambiguous * max(1, n_turns):
@@ -418,6 +419,52 @@ def solve_turns(n: int, edges: list[Edge], closing: Edge | None, direction: str,
         status = "unsure"
     total = float(sum(turns)) + (closing_turn or 0.0)
     return LoopVerdict(status, cum, turns, closes, closing_info, total, unsure, disagree, reasons, edge_rows, costs)
+
+
+def measured_turns(n: int, sol: GraphSolution) -> list[bool]:
+    """Per turn of a closed loop (k -> k + 1, the last one n - 1 -> 0), whether the pairs the solution trusts
+    (its inliers) measure it, without the full-turn constraint.
+
+    Why: a pair measures the sum of the turns it spans; a turn is measured when some combination of trusted
+    pairs isolates it (a pair spanning it, minus pairs spanning the rest). A turn no such combination gives is
+    placed by the loop alone, as the full turn minus every other turn: nothing checks it, and whatever the
+    other turns got wrong lands on it unseen."""
+    rows = []
+    for e, ok in zip(sol.edges, sol.inlier, strict=True):
+        if not ok:
+            continue
+        arc = np.zeros(n)
+        if e.wraps:
+            arc[e.i:] = 1.0
+            arc[:e.j] = 1.0
+        else:
+            arc[e.i:e.j] = 1.0
+        rows.append(arc)
+    if not rows:
+        return [False] * n
+    A = np.asarray(rows)
+    rank = np.linalg.matrix_rank(A)
+    return [bool(np.linalg.matrix_rank(np.vstack([A, np.eye(n)[k]])) == rank) for k in range(n)]
+
+
+def unmeasured_turns(n: int, sol: GraphSolution, turns: list[float], cfg: TurnGraphConfig) -> list[str]:
+    """Why a closed loop is unsure because of a turn only the loop places (``measured_turns``), one reason per
+    such turn; ``turns`` the n solved turns, the closing one last.
+
+    A turn the loop alone places is believed when it looks like the turns that were measured (one flipped pair
+    among even steps: the loop's remainder is one more such step). When it is larger or smaller than every
+    measured turn by more than an estimate's own tolerance (frames missing there: the remainder is several
+    steps, which no pair of views confirms), the sequence is unsure."""
+    measured = measured_turns(n, sol)
+    known = [abs(t) for t, m in zip(turns, measured, strict=True) if m]
+    if not known or all(measured):
+        return []
+    tol = cfg.outlier_sigmas * cfg.pair_sigma_deg
+    lo, hi = min(known), max(known)
+    return [f"the turn {k} -> {(k + 1) % n} ({t:+.0f} deg) is measured by no trusted pair: only the loop's full "
+            f"turn places it, and it is unlike every measured turn ({lo:.0f}-{hi:.0f} deg)"
+            for k, (t, m) in enumerate(zip(turns, measured, strict=True))
+            if not m and not lo - tol <= abs(t) <= hi + tol]
 
 
 def _solve_loop(n: int, edges: list[Edge], winding: int, cfg: TurnGraphConfig, step: float | None,

@@ -63,7 +63,7 @@ _EXPORTS: dict[str, str] = {
                      "early_pair_jobs", "fuse", "process_pool_map"), "dynamic.model"),
     "CombineConfig": "dynamic.combine",
     **dict.fromkeys(("PairConfig", "PairJob", "PairResult", "job_fingerprint", "register_pair"), "dynamic.pair"),
-    **dict.fromkeys(("Cloud", "prerotation"), "dynamic.preprocess"),
+    **dict.fromkeys(("Cloud", "prerotation", "stacking_frame"), "dynamic.preprocess"),
     **dict.fromkeys(("TurnResult", "TurnSearchConfig", "known_turn", "project_to_turn", "search_turn"),
                     "dynamic.turn4dof"),
     **dict.fromkeys(("good_descriptor", "good_distance"), "dynamic.good"),

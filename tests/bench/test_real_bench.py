@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import open3d as o3d
+import pytest
 
 from bench.real import judge, model_figures
 
@@ -42,10 +43,12 @@ def _surface() -> tuple[np.ndarray, np.ndarray]:
     return xyz, nrm
 
 
-def _model(folder: Path, left_out: list[int], misplaced: dict[int, float] | None = None) -> dict:
+def _model(folder: Path, left_out: list[int], misplaced: dict[int, float] | None = None,
+           pair_error_deg: float = 0.0, reregistered: dict | None = None) -> dict:
     """A model folder of eight side views a 45-degree turn apart, each seeing +-45 degrees of the surface,
     posed exactly (``misplaced``: view -> degrees its pose is off), whose pair loop composes a flipped pair
-    the model set aside (90 degrees)."""
+    the model set aside (90 degrees). Each pair kept turns ``pair_error_deg`` more than the poses say;
+    ``reregistered``: the model's record of a view it re-registered."""
     xyz, nrm = _surface()
     (folder / "views").mkdir(parents=True)
     poses = []
@@ -57,19 +60,28 @@ def _model(folder: Path, left_out: list[int], misplaced: dict[int, float] | None
         pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(in_view))
         o3d.io.write_point_cloud(str(folder / "views" / f"view_{k:02d}.ply"), pcd)
         poses.append(_rot_z((misplaced or {}).get(k, 0.0)) @ T_model_view)
+    # the pairs map the stacked source (each view turned back by its commanded turn) onto the stacked target
+    edges = [{"index": k, "source_view": (k + 1) % VIEWS, "target_view": k, "path": "prior",
+              "T": _rot_z(90.0 if k == 2 else pair_error_deg).tolist()} for k in range(VIEWS)]
+    edges[-1].update(source_view=0, target_view=VIEWS - 1)
     model = {"views_used": list(range(VIEWS)), "T_model_view": [P.tolist() for P in poses],
              "views_left_out": left_out,
-             "outlier_views": {"implausible_edges": [{"edge": 3, "source_view": 3, "target_view": 2,
-                                                      "correction_deg": 90.0, "window_deg": 30.0}]},
+             "outlier_views": {"implausible_edges": [{"edge": 2, "source_view": 3, "target_view": 2,
+                                                      "correction_deg": 90.0, "window_deg": 30.0}],
+                               "reregistered": [reregistered] if reregistered else []},
              "loop_closure": {"rotation_deg": 90.0, "translation_mm": 60.0},
-             "edges": [{"path": "prior"}] * VIEWS, "configuration": "no_region",
+             "edges": edges, "configuration": "no_region",
              "consistency": {"min_posed_fitness": 0.6}, "points": 1000}
-    (folder / "report.json").write_text(json.dumps({"model": model}))
+    # the object turned clockwise as the views go (the camera stands still): commanded turns -45 deg a view
+    views = [{"index": k, "commanded_turn_deg": -k * STEP_DEG, "object_center": [0.0, 0.0, -0.03],
+              "object_height_m": 0.06, "table": {"normal": [0.0, 0.0, 1.0]}} for k in range(VIEWS)]
+    (folder / "report.json").write_text(json.dumps({"model": model, "views": views}))
     return model
 
 
 def _row(model: dict, folder: Path) -> dict:
-    row = {"import_status": "closed", "accepted": True, **model_figures(model, folder)}
+    views = json.loads((folder / "report.json").read_text())["views"]
+    row = {"import_status": "closed", "accepted": True, **model_figures(model, folder, views)}
     row["status"], row["reason"] = judge(row)
     return row
 
@@ -98,3 +110,28 @@ def test_a_model_that_kept_every_pair_reports_its_own_loop(tmp_path):
     model["loop_closure"] = {"rotation_deg": 0.4, "translation_mm": 1.2}
     row = _row(model, tmp_path)
     assert row["loop_over"] == "pairs" and row["loop_deg"] == 0.4 and row["loop_translation_mm"] == 1.2
+
+
+def test_the_loop_over_kept_views_composes_the_pairs_the_model_kept(tmp_path):
+    """The seven pairs kept each turn 1 degree more than the views are posed: the model's own pairs open the
+    loop by 7 degrees, which re-registering the (exactly posed) views would not see. Only the step whose
+    pair was set aside (2 -> 3) is measured anew."""
+    row = _row(_model(tmp_path, [], pair_error_deg=1.0), tmp_path)
+    assert row["loop_deg"] == pytest.approx(7.0, abs=0.3), row["steps"]
+    assert [(s["from"], s["to"]) for s in row["steps"] if s["by"] == "icp"] == [(2, 3)]
+    assert row["status"] == "missed"
+
+
+def test_a_view_the_model_re_registered_is_linked_by_its_re_registration_not_its_pairs(tmp_path):
+    """View 1 was re-registered onto view 0 (its pairs' transforms no longer pose it): its pairs, 20 degrees
+    off, are not composed; the re-registration (the pose itself) links it to view 0, ICP of the posed views
+    links it to view 2."""
+    model = _model(tmp_path, [], reregistered={"view": 1, "position": 1, "fitness": 0.97,
+                                               "tried": [{"from_view": 0, "fitness": 0.97, "correction_deg": 1.0},
+                                                         {"from_view": 2, "fitness": 0.1, "correction_deg": 9.0}]})
+    for e in model["edges"][:2]:
+        e["T"] = _rot_z(20.0).tolist()
+    row = _row(model, tmp_path)
+    by = {(s["from"], s["to"]): s["by"] for s in row["steps"]}
+    assert by[(0, 1)] == "pair" and by[(1, 2)] == "icp" and by[(2, 3)] == "icp"
+    assert row["loop_deg"] < 0.5 and row["status"] == "closed", row["reason"]

@@ -188,17 +188,36 @@ def test_a_full_turn_with_frames_missing_closes_although_the_gaps_turn_is_not_me
     this sequence). Started from even steps, a robust solve ignores the closing pairs, leaves the gap at the
     mean step and calls the full turn a partial one; started from the estimates it closes, the gap taking the
     turn the loop leaves it."""
-    est = [-36.16, -24.32, -14.46, -21.21, 30.16, -18.05, -40.73, -39.62, -15.43, -18.14, -17.16, -21.6, -14.68,
-           -18.73]
-    neigh = [_search(t, fitness=0.481 if t > 0 else 0.9) for t in est]
-    two = [-60.28, -37.56, -35.55, 6.28, 10.35, -59.09, 6.41, -55.12, -33.59, -35.22, -39.5, -36.29, -33.43, -9.61,
-           -27.61]
-    further = {(i, (i + 2) % 15): _search(t) for i, t in enumerate(two)}
-    plan = plan_turns(neigh, None, "unknown", closing=_search(8.83, fitness=0.998), further=further)
+    plan = _castard_with_frames_missing()
     loop = plan.loop
     assert loop.loop_closes, loop.closing
     assert plan.direction == "cw" and plan.total_turn_deg == pytest.approx(-360.0, abs=1e-6)
     turns = np.diff(plan.cumulative_deg)
     measured = [k for k in range(14) if k != 4]
-    assert np.all(np.abs(turns[measured] - np.asarray(est)[measured]) < 9.0), turns
+    assert np.all(np.abs(turns[measured] - np.asarray(CASTARD_MISSING_NEIGHBOURS)[measured]) < 9.0), turns
     assert -80.0 < turns[4] < -50.0  # the gap: three steps of ~19 degrees
+
+
+def test_a_turn_only_the_loop_places_unlike_every_measured_turn_makes_the_sequence_unsure():
+    """The same fifteen views: every pair spanning the gap (4 -> 5, 3 -> 5, 4 -> 6) is contradicted, so no pair the
+    solution trusts measures the gap's turn; the loop's full turn alone puts ~60 degrees there, larger than any
+    measured turn (14-41 degrees). Nothing confirms it, so the import says unsure, naming the turn."""
+    plan = _castard_with_frames_missing()
+    assert plan.loop.loop_closes
+    assert plan.status == "unsure", plan.loop.reasons
+    why = [r for r in plan.loop.reasons if "measured by no trusted pair" in r]
+    gap = np.diff(plan.cumulative_deg)[4]
+    assert len(why) == 1 and why[0].startswith(f"the turn 4 -> 5 ({gap:+.0f} deg)"), plan.loop.reasons
+
+
+CASTARD_MISSING_NEIGHBOURS = [-36.16, -24.32, -14.46, -21.21, 30.16, -18.05, -40.73, -39.62, -15.43, -18.14, -17.16,
+                              -21.6, -14.68, -18.73]
+
+
+def _castard_with_frames_missing():
+    """The turns planned from castard's estimates after frames were removed (three missing after view 4)."""
+    neigh = [_search(t, fitness=0.481 if t > 0 else 0.9) for t in CASTARD_MISSING_NEIGHBOURS]
+    two = [-60.28, -37.56, -35.55, 6.28, 10.35, -59.09, 6.41, -55.12, -33.59, -35.22, -39.5, -36.29, -33.43, -9.61,
+           -27.61]
+    further = {(i, (i + 2) % 15): _search(t) for i, t in enumerate(two)}
+    return plan_turns(neigh, None, "unknown", closing=_search(8.83, fitness=0.998), further=further)
