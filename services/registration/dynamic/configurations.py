@@ -17,6 +17,7 @@ is high; ``all`` runs all four and takes the best score. Either way the reason i
 from __future__ import annotations
 
 import math
+import statistics
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -128,10 +129,7 @@ def loop_translation_gate_mm(outcome: ConfigurationOutcome, criteria: AcceptCrit
     rmse = [x for x in outcome.consistency.get("posed_rmse_mm") or [] if math.isfinite(x)]
     if not rmse or not getattr(outcome, "results", None):  # no per-pair figures (a summary): the fixed gate
         return criteria.max_loop_translation_mm
-    rmse.sort()
-    mid = len(rmse) // 2
-    noise = rmse[mid] if len(rmse) % 2 else 0.5 * (rmse[mid - 1] + rmse[mid])
-    return criteria.loop_noise_sigmas * math.sqrt(len(outcome.results)) * noise
+    return criteria.loop_noise_sigmas * math.sqrt(len(outcome.results)) * statistics.median(rmse)
 
 
 def acceptable(outcome: ConfigurationOutcome, criteria: AcceptCriteria) -> bool:

@@ -364,12 +364,11 @@ def _finish_configuration(prep: Prepared, name: str, config: DynamicConfig,
     if len(judged) != len(results):
         consistency["edges"] = [r.index for r in judged]
     left_out = handled.left_out_positions if handled is not None else set()
+    kept = [k for k in range(len(prep.views)) if k not in left_out]
     if handled is not None and (handled.outliers or handled.implausible_edges):  # the loop no longer judges
         kept_edges = [r for r in combine_on if r.source_view not in left_out and r.target_view not in left_out]
-        consistency["unmeasured_gaps"] = unmeasured_gaps(
-            prep, combined.poses, kept_edges, [k for k in range(len(prep.views)) if k not in left_out],
-            config.combine)
-    turns = check_turns(combined.poses, prep.axis, [k for k in range(len(prep.views)) if k not in left_out],
+        consistency["unmeasured_gaps"] = unmeasured_gaps(prep, combined.poses, kept_edges, kept, config.combine)
+    turns = check_turns(combined.poses, prep.axis, kept,
                         oc.turn_sigma_deg, config.accept.turn_sigmas, [v.index for v in prep.views])
     consistency["turns"] = turns.to_json()
     out = ConfigurationOutcome(name, results, combined, loop, consistency, 0.0, outliers=handled, turns=turns)
