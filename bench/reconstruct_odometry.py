@@ -16,6 +16,11 @@ Variants (``VARIANTS``):
   level.
 * ``fine_only``: forward (0, 0, 1): the reverse seed, then only the full-resolution iteration.
 * ``quarter_seed``: the reverse seed pass on quarter-resolution images (160 x 120), the forward as shipped.
+* ``roi_window``: both passes on the view's images cut to the union of its scans' region-of-interest pixel
+  boxes grown by 16 px (``odometry_window_margin``; the shipped setting runs them on the whole image).
+* ``roi_window_48``: the same rectangle grown by 48 px.
+* ``forward_16_8_1``: the forward pass with 8 iterations (not 16) at half resolution, its costliest coarse level.
+* ``seed_16_8``: the reverse seed pass with 8 iterations (not 16) at its finer level (half resolution).
 
 Each variant is a ``StaticConfig`` of the public API (the benchmarks use registration through it only), so
 what it measures is what a user would get from that setting. Open3D's tensor odometry is not a setting of the
@@ -45,6 +50,10 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "half_resolution": {"odometry_step": 2, "odometry_iterations": (16, 16), "odometry_seed_step": 1},
     "fine_only": {"odometry_iterations": (0, 0, 1)},
     "quarter_seed": {"odometry_seed_step": 4},
+    "roi_window": {"odometry_window_margin": 16},
+    "roi_window_48": {"odometry_window_margin": 48},
+    "forward_16_8_1": {"odometry_iterations": (16, 8, 1)},
+    "seed_16_8": {"odometry_seed_iterations": (16, 8)},
 }
 
 

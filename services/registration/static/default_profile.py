@@ -26,6 +26,7 @@ from services.registration.cloud import downsample, to_o3d
 from . import pairwise as pw
 from .config import StaticConfig
 from .odometry import pinhole, rgbd_image, rgbd_odometry
+from .odometry_window import ImageWindow, odometry_window
 from .plausibility import correction_bound, implausibility, plausible
 from .posegraph import optimise
 from .result import PairOutcome, Stopwatch
@@ -276,18 +277,19 @@ def _fallback(src: PriorScan, tgt: PriorScan, prior: np.ndarray, cfg: StaticConf
     return best
 
 
-def _prepare(scan: Scan, frame: RGBDFrame, cfg: StaticConfig) -> PriorScan:
+def _prepare(scan: Scan, frame: RGBDFrame, cfg: StaticConfig, window: ImageWindow | None) -> PriorScan:
     pcd = to_o3d(scan.pts_cam.xyz, scan.pts_cam.rgb)
     seed_step = cfg.odometry_step * cfg.odometry_seed_step
     return PriorScan(
         cfg=cfg,
         pcd=pcd,
         check=downsample(pcd, cfg.check_voxel, normals=False),
-        intrinsic=pinhole(frame, cfg.odometry_step),
-        make_image=lambda: rgbd_image(frame, step=cfg.odometry_step, depth_min=cfg.depth_min, depth_max=cfg.depth_max),
+        intrinsic=pinhole(frame, cfg.odometry_step, window),
+        make_image=lambda: rgbd_image(frame, step=cfg.odometry_step, depth_min=cfg.depth_min, depth_max=cfg.depth_max,
+                                      window=window),
         make_seed_image=None if cfg.odometry_seed_iterations is None else lambda: (
-            rgbd_image(frame, step=seed_step, depth_min=cfg.depth_min, depth_max=cfg.depth_max),
-            pinhole(frame, seed_step),
+            rgbd_image(frame, step=seed_step, depth_min=cfg.depth_min, depth_max=cfg.depth_max, window=window),
+            pinhole(frame, seed_step, window),
         ),
     )
 
@@ -308,9 +310,19 @@ def _up_in(scan: Scan, cfg: StaticConfig) -> np.ndarray | None:
     return scan.T_believed[:3, :3].T @ np.asarray(cfg.expected_up, dtype=np.float64)
 
 
-def prepare(scans: list[Scan], frames: list[RGBDFrame], cfg: StaticConfig) -> list[PriorScan]:
-    """Each scan's clouds and images for the prior-seeded path (what only the fallbacks need, lazily)."""
-    return [_prepare(s, f, cfg) for s, f in zip(scans, frames, strict=True)]
+def prepare(scans: list[Scan], frames: list[RGBDFrame], cfg: StaticConfig,
+            window: ImageWindow | None = None) -> list[PriorScan]:
+    """Each scan's clouds and images for the prior-seeded path (what only the fallbacks need, lazily); the
+    odometry's images cut to ``window`` (None: the whole image)."""
+    return [_prepare(s, f, cfg, window) for s, f in zip(scans, frames, strict=True)]
+
+
+def view_window(scans: list[Scan], frames: list[RGBDFrame], seed_base: np.ndarray | None,
+                cfg: StaticConfig) -> ImageWindow | None:
+    """The view's odometry window from its scans' ROI pixels (after ``crop_to_roi``), None for the whole image."""
+    k = frames[0].intrinsics
+    has_roi = seed_base is not None and cfg.roi_radius is not None
+    return odometry_window([s.pts_cam.pixel for s in scans], k.width, k.height, has_roi, cfg)
 
 
 def register(
@@ -322,7 +334,7 @@ def register(
     if len(scans) == 1:
         return [np.eye(4)], [None]
     with sw("preprocess"):
-        data = prepare(scans, frames, cfg)
+        data = prepare(scans, frames, cfg, view_window(scans, frames, seed_base, cfg))
     with sw("register"):
         edges, outcomes = [], {}
         for j in range(1, len(scans)):

@@ -14,14 +14,22 @@ import open3d as o3d
 
 from common.messages import RGBDFrame
 
+from .odometry_window import ImageWindow
+
 odo = o3d.pipelines.odometry
 
 
-def rgbd_image(frame: RGBDFrame, *, step: int, depth_min: float, depth_max: float) -> o3d.geometry.RGBDImage:
-    """The frame as an Open3D RGBD image (intensity + float depth in metres), decimated by ``step``."""
-    depth = np.asarray(frame.depth)[::step, ::step].astype(np.float32) * np.float32(frame.depth_scale)
+def _window(image: np.ndarray, window: ImageWindow | None) -> np.ndarray:
+    return image if window is None else image[window.y0 : window.y1, window.x0 : window.x1]
+
+
+def rgbd_image(frame: RGBDFrame, *, step: int, depth_min: float, depth_max: float,
+               window: ImageWindow | None = None) -> o3d.geometry.RGBDImage:
+    """The frame as an Open3D RGBD image (intensity + float depth in metres), cut to ``window`` (None: the whole
+    image) and decimated by ``step``."""
+    depth = _window(np.asarray(frame.depth), window)[::step, ::step].astype(np.float32) * np.float32(frame.depth_scale)
     depth[depth < depth_min] = 0.0
-    color = np.ascontiguousarray(np.asarray(frame.color)[::step, ::step])
+    color = np.ascontiguousarray(_window(np.asarray(frame.color), window)[::step, ::step])
     return o3d.geometry.RGBDImage.create_from_color_and_depth(
         o3d.geometry.Image(color),
         o3d.geometry.Image(np.ascontiguousarray(depth)),
@@ -31,11 +39,13 @@ def rgbd_image(frame: RGBDFrame, *, step: int, depth_min: float, depth_max: floa
     )
 
 
-def pinhole(frame: RGBDFrame, step: int) -> o3d.camera.PinholeCameraIntrinsic:
-    """Intrinsics of the ``step``-decimated image (pixel i of it is pixel step*i of the original)."""
+def pinhole(frame: RGBDFrame, step: int, window: ImageWindow | None = None) -> o3d.camera.PinholeCameraIntrinsic:
+    """Intrinsics of the image cut to ``window`` (None: the whole image) and ``step``-decimated: pixel i of it is
+    pixel ``x0 + step*i`` of the original, so the principal point moves by the window's corner."""
     k = frame.intrinsics
-    w, h = len(range(0, k.width, step)), len(range(0, k.height, step))
-    return o3d.camera.PinholeCameraIntrinsic(w, h, k.fx / step, k.fy / step, k.cx / step, k.cy / step)
+    x0, y0, x1, y1 = (0, 0, k.width, k.height) if window is None else (window.x0, window.y0, window.x1, window.y1)
+    w, h = len(range(x0, x1, step)), len(range(y0, y1, step))
+    return o3d.camera.PinholeCameraIntrinsic(w, h, k.fx / step, k.fy / step, (k.cx - x0) / step, (k.cy - y0) / step)
 
 
 def rgbd_odometry(
