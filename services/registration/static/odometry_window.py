@@ -10,7 +10,7 @@ multiple of the coarsest pyramid level's pixel so every level holds exactly the 
 Every pixel inside keeps its data: depth outside the ROI but inside the rectangle still takes part.
 
 Off by default (``StaticConfig.odometry_window_margin`` None): over ``bench reconstruct``'s sessions it cut the
-odometry's CPU by a quarter to a third, but the table outside the rectangle is part of what pins the camera's
+odometry's CPU by 14-33 %, but the table outside the rectangle is part of what pins the camera's
 slide, and without it symmetric shapes slid by centimetres (docs/static-registration.md).
 """
 
