@@ -56,7 +56,7 @@ class StaticConfig:
     # Cut both odometry passes' images to one rectangle: the union of the view's ROI pixel bounding boxes grown
     # by this margin (px), snapped to the coarsest pyramid level (odometry_window.py); without a region of
     # interest the whole image. None (the default): the whole image. Measured over `bench reconstruct`'s 7
-    # objects, margin 16: 14-33 % less odometry CPU, but the table outside the rectangle is what pins the
+    # objects, margin 16: 14-33 % less odometry CPU, but the table outside the rectangle is part of what pins the
     # slide: cylinder and cup slid 32 mm, tomato_sauce 6.2 mm, every object's worst error grew (docs).
     odometry_window_margin: int | None = None
     # 2nd choice (odometry failed the check): coarse-to-fine GICP from the arm's pose on the ROI clouds
