@@ -188,41 +188,15 @@ def _leaned(g: np.ndarray, pre: np.ndarray, seated: np.ndarray, name: str, pts: 
     x = np.array([c * out[0] - s_ * out[1], s_ * out[0] + c * out[1], 0.0])
     carried0 = g.copy()
     carried0[:3, 3] += d
-    if roll_last:  # about the hand's z until the approach is level, then about the level approach
-        # the rotation taking the approach to x by the shortest way, then a roll about x that levels the pads
-        v = np.cross(g[:3, 0], x)
-        axis = v / max(float(np.linalg.norm(v)), 1e-12)
-        angle = float(np.degrees(np.arctan2(np.linalg.norm(v), float(g[:3, 0] @ x))))
-        level = rotation_about_line(axis, tcp, np.radians(angle)) @ carried0
-        # about x by r: y' = cos(r) y + sin(r) z, level when cos(r) y_z + sin(r) z_z = 0 (the nearer of two)
-        roll = float(np.degrees(np.arctan2(-level[2, 1], level[2, 2])))
-        roll = roll - 180.0 * np.sign(roll) if abs(roll) > 90.0 else roll
-    else:
-        best: tuple[float, np.ndarray] | None = None
-        for r in (90.0, -90.0):
-            rolled = rotation_about_line(g[:3, 0], tcp, np.radians(r)) @ carried0
-            for z in (np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0])):
-                final = np.column_stack([x, np.cross(z, x), z])
-                rotvec = Rotation.from_matrix(final @ rolled[:3, :3].T).as_rotvec()
-                if best is None or np.linalg.norm(rotvec) < np.linalg.norm(best[1]):
-                    best = (r, rotvec)
-        assert best is not None
-        roll, rotvec = best
-        angle = float(np.degrees(np.linalg.norm(rotvec)))
-        if angle < 1e-6:
-            return None
-        axis = rotvec / np.linalg.norm(rotvec)
+    turn = _tip_then_roll(carried0, tcp, x) if roll_last else _roll_then_tip(carried0, tcp, x)
+    if turn is None:
+        return None
+    arc, axis, angle, roll = turn
 
     def lowest(T: np.ndarray) -> float:  # the object's lowest point with the hand at T
         M = T @ held
         return float((pts @ M[:3, :3].T + M[:3, 3])[:, 2].min())
 
-    if roll_last:
-        tipped_arc = tip_arc(carried0, axis, tcp, angle)
-        arc = [carried0, *tipped_arc, *tip_arc(tipped_arc[-1], tipped_arc[-1][:3, 0], tcp, roll)]
-    else:
-        rolled_arc = tip_arc(carried0, g[:3, 0], tcp, roll)
-        arc = [carried0, *rolled_arc, *tip_arc(rolled_arc[-1], axis, tcp, angle)]
     lift = max(motion.lift, TIP_CLEARANCE - min(lowest(T) for T in arc))
     up = np.array([0.0, 0.0, lift])
     lifted = g.copy()
@@ -249,6 +223,46 @@ def _leaned(g: np.ndarray, pre: np.ndarray, seated: np.ndarray, name: str, pts: 
                         pivot=tcp + up, tip_deg=angle, roll_deg=roll, roll_last=roll_last,
                         lying_center=np.array([*(0.5 * (lo + hi)), 0.0]),
                         lying_height=top, lying_corners=np.array([[lo[0], lo[1], 0.0], [hi[0], hi[1], 0.0]]))
+
+
+#: (hand waypoints from the carried pick to the level approach, tip axis, tip angle deg, roll angle deg)
+LeanTurn = tuple[list[np.ndarray], np.ndarray, float, float]
+
+
+def _tip_then_roll(carried: np.ndarray, tcp: np.ndarray, x: np.ndarray) -> LeanTurn:
+    """About the hand's z until the approach is ``x`` (the shortest way), then about the level approach by the
+    roll that levels the pads (the nearer of the two), both about the TCP."""
+    v = np.cross(carried[:3, 0], x)
+    axis = v / max(float(np.linalg.norm(v)), 1e-12)
+    angle = float(np.degrees(np.arctan2(np.linalg.norm(v), float(carried[:3, 0] @ x))))
+    level = rotation_about_line(axis, tcp, np.radians(angle)) @ carried
+    # about x by r: y' = cos(r) y + sin(r) z, level when cos(r) y_z + sin(r) z_z = 0 (the nearer of two)
+    roll = float(np.degrees(np.arctan2(-level[2, 1], level[2, 2])))
+    roll = roll - 180.0 * np.sign(roll) if abs(roll) > 90.0 else roll
+    tipped = tip_arc(carried, axis, tcp, angle)
+    return [carried, *tipped, *tip_arc(tipped[-1], tipped[-1][:3, 0], tcp, roll)], axis, angle, roll
+
+
+def _roll_then_tip(carried: np.ndarray, tcp: np.ndarray, x: np.ndarray) -> LeanTurn | None:
+    """A quarter roll about the hand's approach (the sign needing the smaller tip after it), then one
+    rotation to the level approach ``x`` with the pads level, both about the TCP; None when nothing is left
+    to turn."""
+    best: tuple[float, np.ndarray] | None = None
+    for r in (90.0, -90.0):
+        rolled = rotation_about_line(carried[:3, 0], tcp, np.radians(r)) @ carried
+        for z in (np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0])):
+            final = np.column_stack([x, np.cross(z, x), z])
+            rotvec = Rotation.from_matrix(final @ rolled[:3, :3].T).as_rotvec()
+            if best is None or np.linalg.norm(rotvec) < np.linalg.norm(best[1]):
+                best = (r, rotvec)
+    assert best is not None
+    roll, rotvec = best
+    angle = float(np.degrees(np.linalg.norm(rotvec)))
+    if angle < 1e-6:
+        return None
+    axis = rotvec / np.linalg.norm(rotvec)
+    rolled_arc = tip_arc(carried, carried[:3, 0], tcp, roll)
+    return [carried, *rolled_arc, *tip_arc(rolled_arc[-1], axis, tcp, angle)], axis, angle, roll
 
 
 def _tipped(grasp: Grasp, g: np.ndarray, pre: np.ndarray, name: str, pts: np.ndarray, d: np.ndarray,
