@@ -8,9 +8,10 @@ Two sets of 12 views x 3 scans each, recorded by the twin (``simulated_views`` w
   turn scatter up to 8 degrees, set-down shifts of about 5 mm), seed 0. Their meshes are written next to
   the sessions, never into the repository.
 
-For every object ``objscan reconstruct SESSION --out DIR --gt MESH`` runs **as a subprocess** (the CLI, imports
-and evaluation included) and is timed: wall seconds (``seconds``), and CPU seconds of the child (``getrusage``
-of the children: user + sys, all threads and worker processes). From its ``report.json``: the static stage's
+For every object ``objscan reconstruct SESSION --out DIR`` runs **as a subprocess** (the CLI with its imports,
+as a user runs it; no ``--gt``: the bench scores the model itself, below, as it scores the peer's) and is
+timed: wall seconds (``seconds``), and CPU seconds of the child (``getrusage`` of the children: user + sys,
+all threads and worker processes). From its ``report.json``: the static stage's
 seconds per view and share of scans that fell back to the global path, the worst static pose error
 (relative to scan 0, against the twin's truth), the dynamic configurations run and the one chosen.
 
@@ -79,9 +80,9 @@ def _timed(cmd: list[str], env: dict[str, str]) -> tuple[subprocess.CompletedPro
     return proc, time.perf_counter() - t0, _children_cpu() - c0
 
 
-def run_cli(session: Path, out: Path, gt: str, env: dict[str, str]) -> dict[str, Any]:
+def run_cli(session: Path, out: Path, env: dict[str, str]) -> dict[str, Any]:
     """Time ``objscan reconstruct`` as a subprocess: wall and CPU seconds of the child, its exit code."""
-    cmd = [sys.executable, "-m", "services.cli", "reconstruct", str(session), "--out", str(out), "--gt", gt]
+    cmd = [sys.executable, "-m", "services.cli", "reconstruct", str(session), "--out", str(out)]
     proc, wall, cpu = _timed(cmd, env)
     return {"wall_s": wall, "cpu_s": cpu, "returncode": proc.returncode,
             "stderr_tail": proc.stderr[-400:] if proc.returncode else ""}
@@ -156,7 +157,7 @@ def set_objects(object_set: str, quick: bool = False) -> list[tuple[str, str]]:
 
 
 def session_and_truth(object_set: str, name: str, sessions: Path, seed: int = 0) -> tuple[Path, str]:
-    """(session folder, ground truth for ``--gt``: a HOPE name or the primitive's mesh path)."""
+    """(session folder, ground truth: a HOPE name or the primitive's mesh path)."""
     if object_set == "harsh":
         from bench import harsh_set
 
@@ -181,7 +182,7 @@ def measure(name: str, tmp: Path, sessions: Path, env: dict[str, str], seed: int
     session, truth = session_and_truth(object_set, name, sessions, seed)
     out = tmp / f"{name}_out"
     load = os.getloadavg()[0]
-    row: dict[str, Any] = {"set": object_set, "object": name, **run_cli(session, out, truth, env)}
+    row: dict[str, Any] = {"set": object_set, "object": name, **run_cli(session, out, env)}
     row["load_average_1min"] = [round(load, 2), round(os.getloadavg()[0], 2)]  # before and after the CLI
     row["seconds"] = row["wall_s"]
     if not (out / REPORT_FILE).is_file() or not (out / MODEL_FILE).is_file():
@@ -301,7 +302,7 @@ def report_figures(rows: list[dict[str, Any]], object_set: str, env: dict[str, s
         "sets": sets,
         "profile": PROFILE if sets == ["realistic"] else {"harsh": "harsh", "realistic": PROFILE},
         "object_names": [r["object"] for r in rows],
-        "command": "objscan reconstruct SESSION --out DIR --gt MESH (subprocess, default workers); peer: "
+        "command": "objscan reconstruct SESSION --out DIR (subprocess, default workers); peer: "
                    "python -m bench.multiway_peer SESSION MODEL (subprocess, from the raw frames)",
         **summarize(rows),
         "by_set": {s: summarize([r for r in rows if r["set"] == s]) for s in sets},
