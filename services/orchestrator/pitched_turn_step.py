@@ -1,0 +1,108 @@
+"""The state machine's side of the turn by a pitched pick (geometry: ``pitched_turn.py``): when to try it,
+which chains first, and executing the first one the arm can run whole. Functions over an ``Acquisition``
+(``machine.py``), so that the machine only calls in once, in a turn step's last strategies.
+
+When: top-down grasps were planned and not one of their turns (nor a reposition) was executable where the
+object stands, and the plan has pitched picks (a box thin along the line from the base). Before a lay-down,
+which restarts the views: this keeps them.
+
+Which first, nearest carry first: the view's own turn (``direction`` times the session's turn: recorded as
+any turn with a relocated set-down, the 12 views stay 30 degrees apart), the session's direction first;
+then the quarter turn, which puts the box's thin side across the line from the base where frontal grasps
+close across it (recorded as a reposition with a turn: the view is scanned again where it stands, its
+commanded turn grown by the quarter turn when views before it are kept, see
+``TurnJournal.record_reposition``). Within each, the way up leaning away from the base first (a straight-down
+hand near the base reaches only 15 cm high at 0.40 m: measured with the arm's kinematics, it cannot leave a
+15 cm box straight up).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from common.api import ViewResult
+from services.grasp.pitch import pitched
+from services.orchestrator.config import RelocationConfig
+from services.orchestrator.pitched_turn import LEANS_DEG, QUARTER_DEG, PitchedTurnPoses, pitched_turn_sequences
+
+if TYPE_CHECKING:
+    from services.orchestrator.states import State
+
+#: The running acquisition (``machine.Acquisition``), typed loosely: that module imports this one.
+Acquisition = Any
+#: m from the base where the box is stood upright. Measured with the arm's kinematics and the scan-pose
+#: check, for the 15.3 cm slab: a straight-down hand sets it down at 0.40 and 0.425 m (it reaches only
+#: 15 cm high at 0.40 m, 11 cm at 0.45 m, nothing at 0.50 m), and its scan poses are reachable from 0.425 m
+#: out (at 0.40 m they are not, for any object above about 12 cm).
+STAND_RADIUS = 0.425
+
+
+def turn_angles(turn_deg: float, fixed: int | None) -> list[float]:
+    """The turns to try, in order: the view's turn (the session's direction only, once it has one; else
+    both ways), then the quarter turn both ways."""
+    own = [turn_deg * d for d in ((fixed,) if fixed else (1, -1))]
+    return [*own, QUARTER_DEG, -QUARTER_DEG]
+
+
+def stand_shifts(center: np.ndarray, config: RelocationConfig) -> list[np.ndarray]:
+    """Carries (x, y, 0) to the spots the box is stood upright at, nearest first: ``STAND_RADIUS`` from the
+    base at the relocation azimuths, then where it stands (only an object already there is stood up there)."""
+    c = np.asarray(center, float)[:2]
+    out = [np.array([*(STAND_RADIUS * np.array([np.cos(np.radians(a)), np.sin(np.radians(a))]) - c), 0.0])
+           for a in config.azimuths_deg]
+    out = sorted((d for d in out if np.linalg.norm(d) >= config.min_shift), key=lambda d: float(np.linalg.norm(d)))
+    return [*out, np.zeros(3)]
+
+
+def chains(acq: Acquisition, view: ViewResult) -> list[tuple[int, PitchedTurnPoses]]:
+    """(grasp index, chain) of every pitched pick of the current plan, in the order to try them."""
+    plan = acq._plan
+    if plan is None:
+        return []
+    cfg = acq.config
+    angles = turn_angles(float(cfg.turn_deg), acq.j.turn_direction)
+    out: list[tuple[tuple, int, PitchedTurnPoses]] = []
+    for di, d in enumerate(stand_shifts(view.center, cfg.turn.relocation)):
+        for gi, grasp in enumerate(plan.grasps):
+            if not any(pitched(n) for n in grasp.poses):
+                continue
+            for seq in pitched_turn_sequences(grasp, view.cloud.xyz, view.center, view.height, cfg.turn, [d],
+                                              tuple(angles), LEANS_DEG, float(cfg.turn_deg)):
+                out.append(((di, angles.index(seq.turn_deg), LEANS_DEG.index(seq.lean_deg), gi), gi, seq))
+    out.sort(key=lambda c: c[0])  # stable: within a key, the generator's order (pitch, pads, carry first)
+    return [(gi, seq) for _, gi, seq in out]
+
+
+async def try_pitched_turn(acq: Acquisition, k: int, view: ViewResult, box: tuple[np.ndarray, np.ndarray],
+                           failures: list[str]) -> State | None:
+    """Turn the object of view ``k`` by a pitched pick if a chain of it is executable: the next state, or
+    None when none was (or the plan has no pitched pick)."""
+    todo = chains(acq, view)
+    if not todo:
+        return None
+    rc = acq.config.turn.relocation
+    acq.decide("turning by a pitched pick: no other turn is executable", chains=len(todo))
+    scannable: dict[tuple, bool] = {}
+    checks = 0
+    for gi, seq in todo:
+        if checks >= rc.max_checks:
+            break
+        spot = np.asarray(view.center, float) + seq.carry
+        if not await acq._scannable_spot(spot, view.height, scannable):
+            continue
+        grasp = acq._plan.grasps[gi]
+        checks += 1
+        acq.j.counters.grasp_checks += 1
+        q_start = await acq._dry_run(k, seq, view.center, float(grasp.width), failures)
+        if q_start is None:
+            continue
+        outcome = await acq._attempt(k, gi, grasp, seq, q_start, box, f"{grasp.kind}:{gi}:{seq.name}", failures)
+        if outcome is not None:  # executed (or it slipped: re-scanned): the journal says it was tried
+            acq.j.regrasps.setdefault(str(k), []).append(
+                {"strategy": "pitched turn", "pose": seq.name, "turn_deg": seq.turn_deg,
+                 "shift": np.round(seq.carry, 4).tolist(), "restart": acq.j.topple_restarts})
+            return outcome
+    acq.decide("no pitched turn executable", checks=checks)
+    return None

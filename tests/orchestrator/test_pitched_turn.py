@@ -1,0 +1,94 @@
+"""A box only a pitched pick can hold is turned by it: picked pitched, carried to 0.425 m from the base, stood upright
+turned, and the acquisition goes on. A generated slab 5.4 cm thin along the line from the base, 15.8 cm across
+(wider than the 10.6 cm stroke), 15.3 cm tall, at the workspace centre (0.60 m): no frontal or top-down turn of
+it reaches there, and lying on its other edge it would be no lower, so before this move it stopped at view 0
+"limit: reach". The arm is the real kinematics (its own line checks), the planner the real one.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from services.arm.kinematics import Kinematics
+from services.grasp.planner import plan_grasps
+from services.grasp.service import GraspService
+from services.orchestrator.config import RelocationConfig, TurnMotion
+from services.orchestrator.lay_down import whole_object
+from services.orchestrator.machine import State
+from services.orchestrator.pitched_turn import QUARTER_TURN, pitched_turn_sequences, turn_direction
+from services.orchestrator.pitched_turn_step import STAND_RADIUS, stand_shifts, turn_angles
+from tests.grasp.shapes import table_plane
+from tests.orchestrator.test_lay_down import THIN_WIDE_BOX, WORKSPACE, _held, _standing_tall_box, _view
+from tests.orchestrator.test_recovery import _steps
+
+
+@pytest.fixture(scope="module")
+def kin() -> Kinematics:
+    return Kinematics()
+
+
+def _pitched_chains(angles: tuple[float, ...]):  # noqa: ANN202
+    view = _view(THIN_WIDE_BOX, WORKSPACE, 0)
+    plan = plan_grasps(view.cloud.xyz, view.cloud.normals, table_plane(),
+                       replace(GraspService.planner_config(), mode="top_down"))
+    grasps = plan.to_messages()
+    seqs = [s for g in grasps for s in pitched_turn_sequences(g, view.cloud.xyz, view.center, view.height,
+                                                                TurnMotion(), stand_shifts(view.center,
+                                                                                           RelocationConfig()),
+                                                                angles)]
+    return view, grasps, seqs
+
+
+@pytest.mark.parametrize("angle", [30.0, -90.0])
+def test_the_slab_is_stood_upright_turned_near_the_base_by_a_pitched_pick(kin, angle):
+    """A chain of the pitched pick is executable in full for the view's turn and for a quarter turn either way;
+    it sets the slab down upright, turned by that angle about its vertical, just above the table on the near
+    ring; the hand leaves leaning away from the base (straight up it cannot: a straight-down hand reaches only
+    15 cm high there)."""
+    from tests.orchestrator.test_turn_reach import _executable
+
+    view, grasps, seqs = _pitched_chains((angle,))
+    ok = next((s for s in seqs if np.linalg.norm(s.carry) > 0 and _executable(kin, s)), None)
+    assert ok is not None, sorted({s.name for s in seqs})
+    pts = whole_object(view.cloud.xyz, view.center)
+    assert ok.lean_deg > 0 and ok.retreat[2, 3] > ok.turned[2, 3] + 0.05
+    for seq in seqs:
+        assert "_pitch" in seq.name and seq.direction == turn_direction(angle, 30.0)
+        assert abs(seq.direction) == (1 if abs(angle) == 30.0 else QUARTER_TURN)
+        rest = seq.turned @ _held(grasps, seq)  # the slab's motion from where it stood to where it is released
+        assert rest[2, 2] == pytest.approx(1.0, abs=1e-6)  # upright
+        assert np.degrees(np.arctan2(rest[1, 0], rest[0, 0])) == pytest.approx(angle, abs=1e-6)
+        moved = pts @ rest[:3, :3].T + rest[:3, 3]
+        assert float(moved[:, 2].min()) == pytest.approx(float(pts[:, 2].min()) + 0.004, abs=1e-6)
+        for mv in seq.straight_moves(view.center):  # held from the lift to the set-down: above the table
+            if mv.phase == "held":
+                M = mv.target @ _held(grasps, seq)
+                assert float((pts @ M[:3, :3].T + M[:3, 3])[:, 2].min()) > 0.0, mv.step
+    assert np.hypot(*(view.center[:2] + ok.carry[:2])) == pytest.approx(STAND_RADIUS, abs=0.01)
+
+
+def test_the_views_own_turn_comes_first_then_the_quarter_turn():
+    assert turn_angles(30.0, None) == [30.0, -30.0, 90.0, -90.0]
+    assert turn_angles(30.0, -1) == [-30.0, 90.0, -90.0]
+
+
+@pytest.mark.slow  # every standing chain is dry-run first, as in a real acquisition: ~20 s idle
+def test_the_state_machine_turns_the_slab_by_its_pitched_pick_and_goes_on(kin, tmp_path):
+    """In the state machine at view 0 with top-down grasps planned: no turn, relocated set-down or reposition
+    of them is executable, so the slab is turned by its pitched pick (the view's own 30 degrees, set down on
+    0.425 m from the base) and the acquisition goes on at view 1 with the turn recorded as any turn."""
+    cell, acq = _standing_tall_box(kin, tmp_path, rescans=0, size=THIN_WIDE_BOX)
+    acq.j.grasp_mode = "top_down"
+    states = asyncio.run(_steps(acq, 4))
+    assert states[-1] == State.SCAN, acq.j.decisions[-5:]
+    assert acq.view == 1 and abs(acq.j.turns_deg[1]) == 30.0, acq.j.decisions[-3:]
+    assert any(e["strategy"] == "pitched turn" and "_pitch" in e["pose"] for e in acq.j.regrasps["0"])
+    assert np.hypot(*acq.j.centers["1"][:2]) == pytest.approx(STAND_RADIUS, abs=0.01)  # the next scan poses: there
+    assert "pitched turn" in acq._recoveries_tried(0)
+    moved = [m for m in cell.log if not m["dry_run"]]
+    assert moved  # the arm ran it
+
