@@ -92,3 +92,32 @@ def test_the_state_machine_turns_the_slab_by_its_pitched_pick_and_goes_on(kin, t
     moved = [m for m in cell.log if not m["dry_run"]]
     assert moved  # the arm ran it
 
+
+
+@pytest.mark.parametrize("k", [0, 2])
+def test_a_quarter_turn_is_recorded_with_its_turn_and_the_view_is_scanned_again(tmp_path, k):
+    """The record at the release of a quarter turn: the view is scanned again where the slab now stands (its
+    old frames kept aside), its commanded turn grown by the quarter turn when earlier views are kept (the
+    registration's turn prior is the turn made), untouched at view 0 (where the object's frame starts); the
+    journal says which move it was."""
+    from services.orchestrator.config import AcquisitionConfig
+    from services.orchestrator.machine import Acquisition
+    from services.session_store import SessionStore
+
+    store = SessionStore(tmp_path)
+    for v in range(k + 1):
+        store.save_view(_view(THIN_WIDE_BOX, WORKSPACE, v))
+    acq = Acquisition(object(), store, AcquisitionConfig(views=12))  # type: ignore[arg-type]
+    turns = [30.0 * v for v in range(k + 1)]
+    acq.j.update(view=k, state="turn", turns_deg=list(turns), turn_direction=1 if k else None,
+                 centers={str(k): WORKSPACE.tolist()}, heights={str(k): THIN_WIDE_BOX[2]})
+    shift = np.array([-0.175, 0.0, 0.0])
+    acq._record_release(k, -QUARTER_TURN, shift)
+    assert acq.view == k and acq.state == State.SCAN and len(acq.j.turns_deg) == k + 1
+    assert acq.j.turns_deg[k] == pytest.approx(turns[k] - 90.0 if k else 0.0)
+    assert acq.j.turns_deg[:k] == turns[:k]
+    assert acq.j.centers[str(k)][:2] == pytest.approx([0.425, 0.0])
+    assert (tmp_path / f"view_{k:02d}_quarter1").is_dir() and not store.has_view(k)
+    entry = acq.j.regrasps[str(k)][-1]
+    assert entry["strategy"] == "quarter turn" and entry["turn_deg"] == -90.0
+    assert acq.j.counters.repositions == 0 and acq.j.turn_direction == (1 if k else None)
