@@ -1,6 +1,6 @@
-"""The turn of a box only a pitched pick can hold: pick it pitched, carry it to the near ring, stand it upright
-turned by the view's turn, set it down there. Geometry only (plain functions over poses, tested without a
-robot); the state machine's side is ``pitched_turn_step.py``.
+"""The turn of a box only a pitched pick can hold: pick it pitched, carry it nearer the base, stand it upright
+turned, set it down there. Geometry only (plain functions over poses, tested without a robot); the state
+machine's side (where, which turn first, the record) is ``pitched_turn_step.py``.
 
 Why: a slab thin along the line from the base and wider than the gripper's stroke the other way (a
 generated box 5.4 x 15.8 x 15.3 cm at 0.60 m) is held only across its thin side, and the only pick of that
@@ -8,17 +8,15 @@ the arm reaches there is the top-down one pitched away from the base (``services
 lay-down is no use (lying on its other edge it stands 16.4 cm, no lower), and no frontal or top-down turn
 of it reaches at 0.60 m: the run ended "no executable grasp; limit: reach" at view 0. Once lifted the box
 sits on the pads as the unpitched top-down grasp holds it, tilted by the pitch; a straight-down hand is what
-sets it down upright, and the arm points straight down at every yaw on the near ring (0.40 m from the base,
-``regrasp.py``), not at 0.60 m. So the hand carries it there, turns back upright and about the vertical by
-the view's commanded turn on the way (rotating about its TCP, between the lifted pick and the upright pose
-above the spot), lowers it until it is ``RELEASE_GAP`` above the table, and leaves straight up.
+sets it down upright, and the arm points straight down only nearer the base (at 0.40-0.425 m, not at
+0.60 m). So the hand carries it there, turns back upright and about the vertical on the way (rotating
+about its TCP, between the lifted pick and the upright pose above the spot), lowers it until it is
+``RELEASE_GAP`` above the table, opens, and leaves upward leaning away from the base (``LEANS_DEG``).
 
-It is a turn like any other: one view's commanded turn (``direction`` times the session's turn), with the
-carry a relocated set-down records (``regrasp.relocation_shift``: the next view's scan poses are placed
-around the spot), so the views' turn bookkeeping and the registration's turn prior are those of every other
-turn. A turn of exactly the view's step, not a quarter turn: a quarter turn would skip two views' angles
-(the 12 views would no longer be 30 degrees apart), and on the near ring the next turns of the slab reach
-at every yaw anyway, so nothing needs the slab's thin side put across the line from the base.
+Its turn: a quarter turn (the box's thin side then lies across the line from the base, where ordinary
+grasps close across it) or the view's own turn; ``pitched_turn_step.py`` says which first and how each is
+recorded. Either way the carry is one a relocated set-down records (``regrasp.relocation_shift``: the next
+scan poses are placed around the spot).
 """
 
 from __future__ import annotations

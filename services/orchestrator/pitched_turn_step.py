@@ -3,17 +3,22 @@ which chains first, and executing the first one the arm can run whole. Functions
 (``machine.py``), so that the machine only calls in once, in a turn step's last strategies.
 
 When: top-down grasps were planned and not one of their turns (nor a reposition) was executable where the
-object stands, and the plan has pitched picks (a box thin along the line from the base). Before a lay-down,
-which restarts the views: this keeps them.
+object stands, the plan has pitched picks (a box thin along the line from the base), and no pitched turn was
+made at this view yet. Before a lay-down, which restarts the views: this keeps them.
 
-Which first, nearest carry first: the view's own turn (``direction`` times the session's turn: recorded as
-any turn with a relocated set-down, the 12 views stay 30 degrees apart), the session's direction first;
-then the quarter turn, which puts the box's thin side across the line from the base where frontal grasps
-close across it (recorded as a reposition with a turn: the view is scanned again where it stands, its
-commanded turn grown by the quarter turn when views before it are kept, see
-``TurnJournal.record_reposition``). Within each, the way up leaning away from the base first (a straight-down
-hand near the base reaches only 15 cm high at 0.40 m: measured with the arm's kinematics, it cannot leave a
-15 cm box straight up).
+Which first, nearest carry first: the quarter turn, which stands the box with its thin side across the
+line from the base, where frontal and top-down grasps close across it and turn it (measured with the arm's
+kinematics, the 5.4 x 15.8 x 15.3 cm slab at 0.425 m: frontal and top-down turns executable with its thin
+side across the line from the base or 60 degrees off it, only one top-down pose 30 degrees off it, none
+along it); it is recorded as a reposition with a turn (the view is scanned again where it stands, its
+commanded turn grown by the quarter turn when views before it are kept, ``TurnJournal.record_reposition``).
+Then the view's own turn (``direction`` times the session's turn, the session's direction first: recorded as
+any turn with a relocated set-down). Within each, the way up leaning away from the base first (a
+straight-down hand reaches only 15 cm high at 0.40 m: it cannot leave a 15 cm box straight up).
+
+A slab turned 30 degrees a view comes back thin along the line from the base every 180 degrees: the same
+move stands it across again there (at a view after 0 the quarter turn leaves the views' angles uneven: two
+or three of them are seen twice and as many not at all, which the session's turns say).
 """
 
 from __future__ import annotations
@@ -40,10 +45,11 @@ STAND_RADIUS = 0.425
 
 
 def turn_angles(turn_deg: float, fixed: int | None) -> list[float]:
-    """The turns to try, in order: the view's turn (the session's direction only, once it has one; else
-    both ways), then the quarter turn both ways."""
+    """The turns to try, in order: the quarter turn both ways (the session's direction first), then the
+    view's turn (the session's direction only, once it has one; else both ways)."""
     own = [turn_deg * d for d in ((fixed,) if fixed else (1, -1))]
-    return [*own, QUARTER_DEG, -QUARTER_DEG]
+    quarter = [QUARTER_DEG, -QUARTER_DEG] if (fixed or 1) > 0 else [-QUARTER_DEG, QUARTER_DEG]
+    return [*quarter, *own]
 
 
 def stand_shifts(center: np.ndarray, config: RelocationConfig) -> list[np.ndarray]:
@@ -79,6 +85,8 @@ async def try_pitched_turn(acq: Acquisition, k: int, view: ViewResult, box: tupl
                            failures: list[str]) -> State | None:
     """Turn the object of view ``k`` by a pitched pick if a chain of it is executable: the next state, or
     None when none was (or the plan has no pitched pick)."""
+    if any(e.get("strategy") == "pitched turn" for e in acq._regrasps_now(k)):
+        return None  # once a view: stood again where it could not be turned, it would only be turned back
     todo = chains(acq, view)
     if not todo:
         return None

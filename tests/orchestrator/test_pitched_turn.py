@@ -71,27 +71,28 @@ def test_the_slab_is_stood_upright_turned_near_the_base_by_a_pitched_pick(kin, a
     assert np.hypot(*(view.center[:2] + ok.carry[:2])) == pytest.approx(STAND_RADIUS, abs=0.01)
 
 
-def test_the_views_own_turn_comes_first_then_the_quarter_turn():
-    assert turn_angles(30.0, None) == [30.0, -30.0, 90.0, -90.0]
-    assert turn_angles(30.0, -1) == [-30.0, 90.0, -90.0]
+def test_the_quarter_turn_comes_first_then_the_views_own_turn():
+    assert turn_angles(30.0, None) == [90.0, -90.0, 30.0, -30.0]
+    assert turn_angles(30.0, -1) == [-90.0, 90.0, -30.0]
 
 
 @pytest.mark.slow  # every standing chain is dry-run first, as in a real acquisition: ~20 s idle
 def test_the_state_machine_turns_the_slab_by_its_pitched_pick_and_goes_on(kin, tmp_path):
     """In the state machine at view 0 with top-down grasps planned: no turn, relocated set-down or reposition
-    of them is executable, so the slab is turned by its pitched pick (the view's own 30 degrees, set down on
-    0.425 m from the base) and the acquisition goes on at view 1 with the turn recorded as any turn."""
+    of them is executable, so the slab is stood a quarter turn round by its pitched pick, 0.425 m from the
+    base, and view 0 is scanned again there (no view kept yet: its frame starts there)."""
     cell, acq = _standing_tall_box(kin, tmp_path, rescans=0, size=THIN_WIDE_BOX)
     acq.j.grasp_mode = "top_down"
     states = asyncio.run(_steps(acq, 4))
     assert states[-1] == State.SCAN, acq.j.decisions[-5:]
-    assert acq.view == 1 and abs(acq.j.turns_deg[1]) == 30.0, acq.j.decisions[-3:]
-    assert any(e["strategy"] == "pitched turn" and "_pitch" in e["pose"] for e in acq.j.regrasps["0"])
-    assert np.hypot(*acq.j.centers["1"][:2]) == pytest.approx(STAND_RADIUS, abs=0.01)  # the next scan poses: there
-    assert "pitched turn" in acq._recoveries_tried(0)
-    moved = [m for m in cell.log if not m["dry_run"]]
-    assert moved  # the arm ran it
-
+    assert acq.view == 0 and acq.j.turns_deg == [0.0], acq.j.decisions[-3:]
+    entries = acq.j.regrasps["0"]
+    assert any(e["strategy"] == "pitched turn" and "_pitch" in e["pose"] and abs(e["turn_deg"]) == 90.0
+               for e in entries)
+    assert any(e["strategy"] == "quarter turn" for e in entries)
+    assert np.hypot(*acq.j.centers["0"][:2]) == pytest.approx(STAND_RADIUS, abs=0.01)  # the next scan poses: there
+    assert {"pitched turn", "quarter turn"} <= set(acq._recoveries_tried(0))
+    assert [m for m in cell.log if not m["dry_run"]]  # the arm ran it
 
 
 @pytest.mark.parametrize("k", [0, 2])
