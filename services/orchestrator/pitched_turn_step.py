@@ -4,7 +4,8 @@ which chains first, and executing the first one the arm can run whole. Functions
 
 When: top-down grasps were planned and not one of their turns (nor a reposition) was executable where the
 object stands, the plan has pitched picks (a box thin along the line from the base), and no pitched turn was
-made at this view yet. Before a lay-down, which restarts the views: this keeps them.
+made at this view yet (one whose grasp failed on contact does not count: the next re-scan's plan tries the
+other picks first). Before a lay-down, which restarts the views: this keeps them.
 
 Which first, nearest carry first: the quarter turn, which stands the box with its thin side across the
 line from the base, where frontal and top-down grasps close across it and turn it (measured with the arm's
@@ -62,6 +63,11 @@ def stand_shifts(center: np.ndarray, config: RelocationConfig) -> list[np.ndarra
     return [*out, np.zeros(3)]
 
 
+def _pick(name: str) -> str:
+    """The pick of a chain's name: its pitched pose and pads (``grasp_pitch35_rolled``)."""
+    return name.split("_turn")[0]
+
+
 def chains(acq: Acquisition, view: ViewResult) -> list[tuple[int, PitchedTurnPoses]]:
     """(grasp index, chain) of every pitched pick of the current plan, in the order to try them."""
     plan = acq._plan
@@ -85,11 +91,13 @@ async def try_pitched_turn(acq: Acquisition, k: int, view: ViewResult, box: tupl
                            failures: list[str]) -> State | None:
     """Turn the object of view ``k`` by a pitched pick if a chain of it is executable: the next state, or
     None when none was (or the plan has no pitched pick)."""
-    if any(e.get("strategy") == "pitched turn" for e in acq._regrasps_now(k)):
+    if any(e.get("strategy") == "pitched turn" and not e.get("slipped") for e in acq._regrasps_now(k)):
         return None  # once a view: stood again where it could not be turned, it would only be turned back
     todo = chains(acq, view)
     if not todo:
         return None
+    failed = {_pick(s.split(":")[-1]) for s in acq.j.failed_grasps.get(str(k), [])}
+    todo.sort(key=lambda c: _pick(c[1].name) in failed)  # a pick that failed here: after the others
     rc = acq.config.turn.relocation
     acq.decide("turning by a pitched pick: no other turn is executable", chains=len(todo))
     scannable: dict[tuple, bool] = {}
@@ -106,11 +114,14 @@ async def try_pitched_turn(acq: Acquisition, k: int, view: ViewResult, box: tupl
         q_start = await acq._dry_run(k, seq, view.center, float(grasp.width), failures)
         if q_start is None:
             continue
-        outcome = await acq._attempt(k, gi, grasp, seq, q_start, box, f"{grasp.kind}:{gi}:{seq.name}", failures)
-        if outcome is not None:  # executed (or it slipped: re-scanned): the journal says it was tried
+        signature = f"{grasp.kind}:{gi}:{seq.name}"
+        outcome = await acq._attempt(k, gi, grasp, seq, q_start, box, signature, failures)
+        if outcome is not None:  # executed, or the grasp failed (re-scanned): the journal says it was tried
+            slipped = signature in acq.j.failed_grasps.get(str(k), [])
             acq.j.regrasps.setdefault(str(k), []).append(
                 {"strategy": "pitched turn", "pose": seq.name, "turn_deg": seq.turn_deg,
-                 "shift": np.round(seq.carry, 4).tolist(), "restart": acq.j.topple_restarts})
+                 "shift": np.round(seq.carry, 4).tolist(), "restart": acq.j.topple_restarts,
+                 **({"slipped": True} if slipped else {})})
             return outcome
     acq.decide("no pitched turn executable", checks=checks)
     return None

@@ -122,3 +122,31 @@ def test_a_quarter_turn_is_recorded_with_its_turn_and_the_view_is_scanned_again(
     entry = acq.j.regrasps[str(k)][-1]
     assert entry["strategy"] == "quarter turn" and entry["turn_deg"] == -90.0
     assert acq.j.counters.repositions == 0 and acq.j.turn_direction == (1 if k else None)
+
+
+def test_after_a_pitched_pick_failed_on_contact_the_other_picks_go_first_and_it_may_turn_again(kin, tmp_path):
+    """A pitched pick whose grasp failed on contact (MuJoCo: a pad landed on the slab) does not use up the
+    view's pitched turn: the next plan tries it again, the picks that did not fail first."""
+    from services.orchestrator.pitched_turn_step import chains, try_pitched_turn
+
+    cell, acq = _standing_tall_box(kin, tmp_path, rescans=1, size=THIN_WIDE_BOX)
+    view = acq.store.load_view(0)
+    acq._plan = asyncio.run(cell.plan_grasps(view.cloud, view.table, "top_down"))
+    first = chains(acq, view)[0][1].name
+    pick = first.split("_turn")[0]
+    acq.j.failed_grasps["0"] = [f"top_down:0:{first}"]
+    acq.j.regrasps["0"] = [{"strategy": "pitched turn", "pose": first, "slipped": True, "restart": 0}]
+    with pytest.MonkeyPatch.context() as mp:
+        tried: list[str] = []
+
+        async def refuse(k, chain, center, width, failures):  # noqa: ANN001, ANN202
+            tried.append(chain.name)
+            return None
+
+        mp.setattr(acq, "_dry_run", refuse)
+        assert asyncio.run(try_pitched_turn(acq, 0, view, (np.zeros(3), np.zeros(3)), [])) is None
+    assert tried and not tried[0].startswith(pick + "_turn")
+    acq.j.regrasps["0"][0].pop("slipped")  # one that was made: not again at this view
+    n = len(acq.j.decisions)
+    assert asyncio.run(try_pitched_turn(acq, 0, view, (np.zeros(3), np.zeros(3)), [])) is None
+    assert len(acq.j.decisions) == n  # not even tried
