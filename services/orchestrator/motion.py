@@ -16,15 +16,11 @@ import numpy as np
 from common.api import MoveResult
 from common.errors import ObjscanError, RemoteError
 from common.messages import Grasp
-from services.grasp.pitch import pitched
 from services.orchestrator.cell import Cell
 from services.orchestrator.config import TurnMotion
 from services.orchestrator.limits import ARM_UNAVAILABLE_CODES
 from services.orchestrator.planning import TurnPoses
 from services.orchestrator.regrasp import relocation_shift
-
-#: m the gripper opens at most before a grasp (its stroke is 0.106 m).
-FULL_OPENING = 0.105
 
 
 class GraspFailed(ObjscanError):
@@ -175,10 +171,7 @@ class ArmMotion:
         is before re-raising.
         """
         c, m = self.cell, self.m
-        # a pitched pick comes in tilted against the box's faces: the planner found its pads clear fully open
-        # only (``services/grasp/pitch.py``); opened to the width and margin, a pad cut the box (MuJoCo:
-        # "pad_collides_with_object", twice in a row, on the 5.4 cm slab)
-        opening = FULL_OPENING if pitched(seq.name) else min(FULL_OPENING, grasp.width + m.open_margin)
+        opening = min(0.105, grasp.width + m.open_margin)
         self.step = "open"
         await c.gripper(opening, m.gripper_force)
         await self.escape(center, height)
