@@ -150,3 +150,11 @@ def test_after_a_pitched_pick_failed_on_contact_the_other_picks_go_first_and_it_
     n = len(acq.j.decisions)
     assert asyncio.run(try_pitched_turn(acq, 0, view, (np.zeros(3), np.zeros(3)), [])) is None
     assert len(acq.j.decisions) == n  # not even tried
+
+
+def test_a_pitched_pick_opens_wider_than_its_width_and_margin_but_not_fully():
+    from services.orchestrator.motion import FULL_OPENING, PITCHED_OPENING, pick_opening
+
+    assert pick_opening(0.0545, 0.04, False) == pytest.approx(0.0945)
+    assert pick_opening(0.0545, 0.04, True) == pytest.approx(PITCHED_OPENING) < FULL_OPENING
+    assert pick_opening(0.09, 0.04, True) == pytest.approx(FULL_OPENING)
