@@ -153,8 +153,10 @@ def test_after_a_pitched_pick_failed_on_contact_the_other_picks_go_first_and_it_
 
 
 def test_a_pitched_pick_opens_wider_than_its_width_and_margin_but_not_fully():
+    """Its tilted pads reach into the box opened to the width and margin (the twin: failed on contact)."""
     from services.orchestrator.motion import FULL_OPENING, PITCHED_OPENING, pick_opening
 
     assert pick_opening(0.0545, 0.04, False) == pytest.approx(0.0945)
-    assert pick_opening(0.0545, 0.04, True) == pytest.approx(PITCHED_OPENING) < FULL_OPENING
+    assert pick_opening(0.0545, 0.04, True) == pytest.approx(PITCHED_OPENING)
+    assert PITCHED_OPENING < FULL_OPENING
     assert pick_opening(0.09, 0.04, True) == pytest.approx(FULL_OPENING)
