@@ -157,6 +157,7 @@ def test_a_pitched_pick_opens_wider_than_its_width_and_margin_but_not_fully():
     from services.orchestrator.motion import FULL_OPENING, PITCHED_OPENING, pick_opening
 
     assert pick_opening(0.0545, 0.04, False) == pytest.approx(0.0945)
+    assert 0.0945 < PITCHED_OPENING < 0.098
     assert pick_opening(0.0545, 0.04, True) == pytest.approx(PITCHED_OPENING)
     assert PITCHED_OPENING < FULL_OPENING
     assert pick_opening(0.09, 0.04, True) == pytest.approx(FULL_OPENING)
