@@ -95,6 +95,8 @@ class TurnJournal:
         d = np.zeros(3) if shift is None else np.asarray(shift, float)
         if str(k) in j.centers:
             j.centers[str(k)] = (np.asarray(j.centers[str(k)], float) + d).tolist()
+            if k == 0:  # view 0's scan poses are placed around the located object: it now stands here
+                j.centers["-1"] = list(j.centers["0"])
         strategy = "quarter turn" if turn_deg else "reposition"
         n = 1 + sum(1 for e in j.regrasps.get(str(k), []) if e.get("strategy") == strategy)  # folder name
         if turn_deg and k > 0:

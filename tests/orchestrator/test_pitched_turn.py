@@ -111,13 +111,16 @@ def test_a_quarter_turn_is_recorded_with_its_turn_and_the_view_is_scanned_again(
     acq = Acquisition(object(), store, AcquisitionConfig(views=12))  # type: ignore[arg-type]
     turns = [30.0 * v for v in range(k + 1)]
     acq.j.update(view=k, state="turn", turns_deg=list(turns), turn_direction=1 if k else None,
-                 centers={str(k): WORKSPACE.tolist()}, heights={str(k): THIN_WIDE_BOX[2]})
+                 centers={"-1": WORKSPACE.tolist(), str(k): WORKSPACE.tolist()},
+                 heights={"-1": THIN_WIDE_BOX[2], str(k): THIN_WIDE_BOX[2]})
     shift = np.array([-0.175, 0.0, 0.0])
     acq._record_release(k, -QUARTER_TURN, shift)
     assert acq.view == k and acq.state == State.SCAN and len(acq.j.turns_deg) == k + 1
     assert acq.j.turns_deg[k] == pytest.approx(turns[k] - 90.0 if k else 0.0)
     assert acq.j.turns_deg[:k] == turns[:k]
     assert acq.j.centers[str(k)][:2] == pytest.approx([0.425, 0.0])
+    center, _ = acq._object_estimate(k if k > 0 else -1)  # where the view's scan poses are placed around
+    assert center[:2] == pytest.approx([0.425, 0.0])
     assert (tmp_path / f"view_{k:02d}_quarter1").is_dir() and not store.has_view(k)
     entry = acq.j.regrasps[str(k)][-1]
     assert entry["strategy"] == "quarter turn" and entry["turn_deg"] == -90.0
