@@ -440,6 +440,9 @@ class Acquisition:
         if any(str(d.get("what", "")).startswith("repositioning") and d.get("view") == k for d in self.j.decisions) \
                 and "reposition" not in out:
             out.append("reposition (not executable)")
+        if any(d.get("what") == "no pitched turn executable" and d.get("view") == k for d in self.j.decisions) \
+                and "pitched turn" not in out:
+            out.append("pitched turn (not executable)")
         if self.j.topple_restarts:
             out.append(f"restart after topple x{self.j.topple_restarts}")
         if (self.j.laid_down or {}).get("state") == "done":

@@ -149,6 +149,10 @@ def test_after_a_pitched_pick_failed_on_contact_the_other_picks_go_first_and_it_
         mp.setattr(acq, "_dry_run", refuse)
         assert asyncio.run(try_pitched_turn(acq, 0, view, (np.zeros(3), np.zeros(3)), [])) is None
     assert tried and not tried[0].startswith(pick + "_turn")
+    assert "pitched turn (not executable)" not in acq._recoveries_tried(0)  # it was made before, slipping
+    acq.j.regrasps["0"] = []
+    assert "pitched turn (not executable)" in acq._recoveries_tried(0)  # the failure summary says it was tried
+    acq.j.regrasps["0"] = [{"strategy": "pitched turn", "pose": first, "slipped": True, "restart": 0}]
     acq.j.regrasps["0"][0].pop("slipped")  # one that was made: not again at this view
     n = len(acq.j.decisions)
     assert asyncio.run(try_pitched_turn(acq, 0, view, (np.zeros(3), np.zeros(3)), [])) is None
