@@ -29,8 +29,9 @@ FULL_OPENING = 0.105
 #: they push it out as they close. The window is narrow, measured on the 5.4 cm slab's 35-degree pick (its
 #: registered view): opened to width and margin (9.4 cm) the twin's pad check found the pads cutting it in 13
 #: of 20 placements within 2 mm and 1 degree (two picks in a row failed on contact in MuJoCo); in MuJoCo at
-#: 9.6 cm it was held, quarter-turned and stood upright as planned; at 9.8, 10.0 and 10.5 cm it slid out of
-#: the pads while lifting (in a whole run it was reported held, then found 4.5 cm farther out, unturned).
+#: 9.6 cm it was held, quarter-turned and stood upright as planned (alone, then in a whole run); alone at 9.8 and
+#: 10.0 cm it slid out of the pads while lifting; in whole runs at 10.0 and 10.5 cm it was reported held, then
+#: found 4.5 cm farther out, unturned (why the two disagree is not established).
 PITCHED_OPENING = 0.096
 
 
