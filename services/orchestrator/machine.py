@@ -57,6 +57,8 @@ from services.orchestrator.lay_down_step import record_laid_down, try_lay_down
 from services.orchestrator.library_insert import insert_session_model_async
 from services.orchestrator.limits import ARM_UNAVAILABLE_CODES, name_limit, name_scan_pose_limit
 from services.orchestrator.motion import ArmMotion, GraspFailed
+from services.orchestrator.pitched_turn import QUARTER_TURN
+from services.orchestrator.pitched_turn_step import try_pitched_turn
 from services.orchestrator.planning import (
     TurnPoses,
     look_pose,
@@ -438,6 +440,9 @@ class Acquisition:
         if any(str(d.get("what", "")).startswith("repositioning") and d.get("view") == k for d in self.j.decisions) \
                 and "reposition" not in out:
             out.append("reposition (not executable)")
+        if any(d.get("what") == "no pitched turn executable" and d.get("view") == k for d in self.j.decisions) \
+                and "pitched turn" not in out:
+            out.append("pitched turn (not executable)")
         if self.j.topple_restarts:
             out.append(f"restart after topple x{self.j.topple_restarts}")
         if (self.j.laid_down or {}).get("state") == "done":
@@ -543,8 +548,10 @@ class Acquisition:
         if seq.direction == LAY_DOWN:  # already journalled at the release (``record_laid_down``)
             self._plan = None
             return State.SCAN
-        if seq.direction == NO_TURN:  # already journalled at the release (``TurnJournal.record_reposition``)
-            self.decide("repositioned: picked and set down without a turn; the view is scanned again there",
+        if seq.direction == NO_TURN or abs(seq.direction) == QUARTER_TURN:  # journalled at the release
+            self.decide("repositioned: picked and set down " + ("without a turn" if seq.direction == NO_TURN else
+                                                                "turned a quarter turn")
+                        + "; the view is scanned again there",
                         grasp=gi, pose=seq.name, kind=grasp.kind, to=self.j.centers.get(str(k), [0, 0])[:2],
                         shift=None if shift is None else np.round(shift[:2], 3).tolist())
             self._plan = None
@@ -687,6 +694,9 @@ class Acquisition:
                                            proactive=False)
             if moved is not None:
                 return moved
+            turned = await try_pitched_turn(self, k, view, (box_c, box_e), failures)  # the pick a box allows
+            if turned is not None:
+                return turned
             laid = await try_lay_down(self, k, view, (box_c, box_e), failures)  # too tall to turn standing
             if laid is not None:
                 return laid

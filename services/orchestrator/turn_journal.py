@@ -16,6 +16,7 @@ import numpy as np
 
 from common.session_folder import view_dir
 from services.orchestrator.journal import Journal
+from services.orchestrator.pitched_turn import QUARTER_DEG, QUARTER_TURN
 from services.orchestrator.reposition import NO_TURN
 from services.orchestrator.states import State
 from services.session_store import SessionStore
@@ -61,9 +62,13 @@ class TurnJournal:
         """The object is released where the turn ends: the next view, its commanded turn, one journal write.
         A relocated set-down (``shift``) also gives the next view's expected centre: its scan poses are
         placed around where the object now stands, not where it stood. A pick-and-place without a turn
-        (a reposition) is recorded by ``record_reposition`` instead: no view is added."""
+        (a reposition) is recorded by ``record_reposition`` instead: no view is added; so is a quarter turn
+        (``pitched_turn.QUARTER_TURN``), with its turn."""
         if direction == NO_TURN:
             self.record_reposition(k, shift)
+            return
+        if abs(direction) == QUARTER_TURN:
+            self.record_reposition(k, shift, turn_deg=QUARTER_DEG * (1 if direction > 0 else -1))
             return
         j = self.j
         if shift is not None and str(k) in j.centers:
@@ -80,22 +85,34 @@ class TurnJournal:
         j.holding = False
         self._save()
 
-    def record_reposition(self, k: int, shift: np.ndarray | None) -> None:
-        """The object was set down unturned at another spot: view ``k`` keeps its commanded turn and is
-        scanned again where the object now stands (its old frames are moved aside, never deleted)."""
+    def record_reposition(self, k: int, shift: np.ndarray | None, turn_deg: float = 0.0) -> None:
+        """The object was set down at another spot: view ``k`` is scanned again where the object now stands
+        (its old frames are moved aside, never deleted). Unturned, it keeps its commanded turn. Turned by
+        ``turn_deg`` (a quarter turn), view ``k``'s commanded turn grows by it when views before it are kept
+        (the registration's turn prior is the turn made); at view 0 nothing is kept yet, and the view scanned
+        again is where the object's frame (turn 0) starts."""
         j = self.j
         d = np.zeros(3) if shift is None else np.asarray(shift, float)
         if str(k) in j.centers:
             j.centers[str(k)] = (np.asarray(j.centers[str(k)], float) + d).tolist()
-        n = 1 + sum(1 for e in j.regrasps.get(str(k), []) if e.get("strategy") == "reposition")  # folder name
+            if k == 0:  # view 0's scan poses are placed around the located object: it now stands here
+                j.centers["-1"] = list(j.centers["0"])
+        strategy = "quarter turn" if turn_deg else "reposition"
+        n = 1 + sum(1 for e in j.regrasps.get(str(k), []) if e.get("strategy") == strategy)  # folder name
+        if turn_deg and k > 0:
+            j.turns_deg[k] = float(j.turns_deg[k]) + float(turn_deg)
         j.regrasps.setdefault(str(k), []).append(
-            {"strategy": "reposition", "restart": j.topple_restarts, "shift": np.round(d, 4).tolist(),
-             "to": np.round(np.asarray(j.centers.get(str(k), d), float)[:2], 4).tolist()})
-        j.counters.repositions += 1
+            {"strategy": strategy, "restart": j.topple_restarts, "shift": np.round(d, 4).tolist(),
+             "to": np.round(np.asarray(j.centers.get(str(k), d), float)[:2], 4).tolist(),
+             **({"turn_deg": float(turn_deg), "commanded_turn_deg": float(j.turns_deg[k])} if turn_deg else {})})
+        if turn_deg:
+            j.counters.regrasps += 1
+        else:
+            j.counters.repositions += 1
         j.grasp_mode = "auto"
         j.turn_intent = None
         j.holding = False
-        j.pending_rescan = {"view": k, "attempt": n, "aside": f"moved{n}"}
+        j.pending_rescan = {"view": k, "attempt": n, "aside": f"{'quarter' if turn_deg else 'moved'}{n}"}
         self._save()
         self.finish_rescan()
         j.state = State.SCAN.value
