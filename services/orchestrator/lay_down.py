@@ -102,6 +102,13 @@ def tip_arc(start: np.ndarray, axis: np.ndarray, pivot: np.ndarray, angle_deg: f
     return [rotation_about_line(axis, pivot, np.radians(angle_deg * i / n)) @ start for i in range(1, n + 1)]
 
 
+
+def lowest_point(hand: np.ndarray, held: np.ndarray, pts: np.ndarray) -> float:
+    """Height of the held object's lowest point with the hand at ``hand``; ``held`` is the object's pose in the
+    hand, ``pts`` its points in its own frame."""
+    M = hand @ held
+    return float((pts @ M[:3, :3].T + M[:3, 3])[:, 2].min())
+
 def stands_tall(xyz: np.ndarray, height: float, ratio: float = TALL_RATIO) -> bool:
     """Whether the standing object is markedly taller than its thinnest horizontal extent (the height it
     would have lying on that side)."""
@@ -193,17 +200,13 @@ def _leaned(g: np.ndarray, pre: np.ndarray, seated: np.ndarray, name: str, pts: 
         return None
     arc, axis, angle, roll = turn
 
-    def lowest(T: np.ndarray) -> float:  # the object's lowest point with the hand at T
-        M = T @ held
-        return float((pts @ M[:3, :3].T + M[:3, 3])[:, 2].min())
-
-    lift = max(motion.lift, TIP_CLEARANCE - min(lowest(T) for T in arc))
+    lift = max(motion.lift, TIP_CLEARANCE - min(lowest_point(T, held, pts) for T in arc))
     up = np.array([0.0, 0.0, lift])
     lifted = g.copy()
     lifted[2, 3] += lift
     tipped_lifted = arc[-1].copy()
     tipped_lifted[:3, 3] += up
-    drop = lowest(tipped_lifted) - RELEASE_GAP
+    drop = lowest_point(tipped_lifted, held, pts) - RELEASE_GAP
     lowered = tipped_lifted.copy()
     lowered[2, 3] -= drop
     M = lowered @ held

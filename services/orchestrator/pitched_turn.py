@@ -30,7 +30,7 @@ from common.geometry import rotation_about_line
 from common.messages import Grasp
 from services.grasp.pitch import pitched
 from services.orchestrator.config import TurnMotion
-from services.orchestrator.lay_down import RELEASE_GAP, ROLL_HALF, TIP_CLEARANCE, whole_object
+from services.orchestrator.lay_down import RELEASE_GAP, ROLL_HALF, TIP_CLEARANCE, lowest_point, whole_object
 from services.orchestrator.planning import ChainMove, TurnPoses, carry_line
 
 #: ``TurnPoses.direction`` of a quarter turn (times the sign of its angle): not one of the view's turns.
@@ -160,10 +160,6 @@ def _chain(g: np.ndarray, pre: np.ndarray, seated: np.ndarray, name: str, pts: n
     moved[:3, 3] += d
     final = rotation_about_line(np.array([0.0, 0.0, 1.0]), spot, np.radians(angle)) @ moved  # upright, turned
 
-    def lowest(T: np.ndarray) -> float:  # the object's lowest point with the hand at T
-        M = T @ held
-        return float((pts @ M[:3, :3].T + M[:3, 3])[:, 2].min())
-
     def path(lift: float) -> list[np.ndarray]:
         up = np.array([0.0, 0.0, lift])
         a = g.copy()
@@ -178,7 +174,7 @@ def _chain(g: np.ndarray, pre: np.ndarray, seated: np.ndarray, name: str, pts: n
         return [*line, *hand_path(carried, b)]
 
     lift = motion.lift
-    low = min(lowest(T) for T in path(lift))
+    low = min(lowest_point(T, held, pts) for T in path(lift))
     if low < TIP_CLEARANCE:  # the tilted object would sweep the table: lift higher first
         lift += TIP_CLEARANCE - low
     upright = path(lift)
@@ -195,18 +191,14 @@ def _chain(g: np.ndarray, pre: np.ndarray, seated: np.ndarray, name: str, pts: n
     above[2, 3] = max(above[2, 3], top + motion.clearance)
     above_pre = pre.copy()
     above_pre[2, 3] = max(above_pre[2, 3], float(pts[:, 2].max()) + motion.clearance)
+    carried = float(np.linalg.norm(d)) >= 1e-6
+    carry_from = upright[-1].copy()  # the set-down pose moved back by the carry: ``regrasp.relocation_shift`` reads d
+    carry_from[:3, 3] -= d
     tag = f"_turn{angle:+g}" + ("" if carry_first else "_carried") + (f"_lean{lean:g}" if lean else "") + \
-        ("" if float(np.linalg.norm(d)) < 1e-6 else f"@{d[0]:+.2f},{d[1]:+.2f}")
+        (f"@{d[0]:+.2f},{d[1]:+.2f}" if carried else "")
     return PitchedTurnPoses(name=f"{name}{tag}", above_pregrasp=above_pre, pregrasp=pre, grasp=g.copy(),
                             lifted=lifted, turned_lifted=upright[-1], turned=turned, retreat=retreat,
                             above_retreat=above, direction=turn_direction(angle, view_turn_deg),
-                            carry_from=None if float(np.linalg.norm(d)) < 1e-6 else upright[-1] - _shift(d),
+                            carry_from=carry_from if carried else None,
                             carry=d.copy(), upright=upright, leave=leave, turn_deg=angle, lean_deg=lean)
 
-
-def _shift(d: np.ndarray) -> np.ndarray:
-    """A 4x4 whose translation column is ``d`` and zero elsewhere: ``T - _shift(d)`` is T moved back by d, so
-    ``regrasp.relocation_shift`` reads the carry ``d`` off the chain."""
-    out = np.zeros((4, 4))
-    out[:3, 3] = d
-    return out

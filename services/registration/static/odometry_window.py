@@ -42,11 +42,6 @@ class ImageWindow:
     def height(self) -> int:
         return self.y1 - self.y0
 
-    def contains(self, pixel: np.ndarray, image_width: int) -> np.ndarray:
-        """Which flat pixel indices (row * ``image_width`` + col) lie inside the window."""
-        row, col = np.divmod(np.asarray(pixel, dtype=np.int64), image_width)
-        return (col >= self.x0) & (col < self.x1) & (row >= self.y0) & (row < self.y1)
-
 
 def pyramid_alignment(cfg: StaticConfig) -> int:
     """Full-resolution pixels per pixel of the coarsest pyramid level of either odometry pass (forward and reverse
