@@ -104,6 +104,15 @@ class GraspPlannerConfig:
     """An end of an axis is hidden when it has at most this fraction of the other end's face points."""
     min_side_face_points: int = 20
     """The seen end needs at least this many face points to be mirrored."""
+    complete_round_sections: bool = True
+    """When the cloud (mirror completion included) gives no grasp and the object stands round on a vertical
+    axis (a can, a jar, a bottle), fill the arc of wall no scan pose saw by turning the seen wall about that
+    axis and plan again (revolve.py). False: the plan stays empty."""
+    round_section_tolerance: float = 0.002
+    """A height band of wall is round when its circle fit's RMS residual is within this (m), and the bands'
+    centres must lie within it of one vertical axis."""
+    round_min_seen_arc_deg: float = 120.0
+    """The seen wall must span this much azimuth about the axis for the fit to be trusted."""
     candidates_per_axis: int = 1
     """Grasps kept per region axis (the paper: the best one)."""
     max_checks_per_axis: int = 25
@@ -195,6 +204,9 @@ class GraspPlannerConfig:
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise GraspConfigError(f"{name} must be positive or None", detail={name: value})
+        if not 0.0 < self.round_min_seen_arc_deg < 360.0:
+            raise GraspConfigError("round_min_seen_arc_deg must be in (0, 360)",
+                                   detail={"value": self.round_min_seen_arc_deg})
         if not 0.0 < self.hidden_side_ratio < 1.0:
             raise GraspConfigError("hidden_side_ratio must be in (0, 1)", detail={"value": self.hidden_side_ratio})
         if self.table_clearance < 0:

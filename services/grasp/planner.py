@@ -37,6 +37,7 @@ from services.grasp.pitch import pitch_poses
 from services.grasp.poses import frontal_rotation, grasp_poses, top_down_rotation
 from services.grasp.ranking import RankedPair, rank_region_pair
 from services.grasp.result import GraspPlan, PlannedGrasp, Rejections
+from services.grasp.revolve import fit_vertical_axis, revolve_unseen_arc
 from services.grasp.roll import roll_poses, round_section
 
 MIN_POINTS = 10
@@ -123,7 +124,7 @@ def plan_grasps(cloud_xyz: Any, normals: Any, table: Plane,
     """
     cfg = config or GraspPlannerConfig()
     t0 = time.perf_counter()
-    inp = validate_inputs(cloud_xyz, normals, table)
+    inp = observed = validate_inputs(cloud_xyz, normals, table)
     frame = object_frame(inp.xyz, inp.up)
     completion = complete_hidden_sides(frame, inp.xyz, inp.normals, inp.up, band=cfg.side_face_band,
                                        face_angle_deg=cfg.side_face_angle_deg, hidden_ratio=cfg.hidden_side_ratio,
@@ -143,27 +144,70 @@ def plan_grasps(cloud_xyz: Any, normals: Any, table: Plane,
     center = frame.to_base(center_local[None, :])[0]
     t1 = time.perf_counter()
     rejections = Rejections(max_examples=cfg.max_examples)
-    grasps: list[PlannedGrasp] = []
     attempted: list[str] = []
     timings = {"prepare": (t1 - t0) * 1e3}
     for side in completion.incomplete_sides:
         rejections.add("side_not_seen", example={
             "axis": side.axis, "status": side.status, "face_points": list(side.points),
             "why": "an antipodal pair on this axis needs a face at both ends; no scan pose saw one of them"})
-    if cfg.mode in ("auto", "frontal", "both"):
-        attempted.append("frontal")
+    grasps = _plan_variants(inp, frame, center, cfg, rejections, attempted, timings)
+    summary = completion.summary()
+    if not grasps and cfg.complete_round_sections:
         ts = time.perf_counter()
-        grasps += _plan_frontal(inp, frame, center, cfg, rejections)
-        timings["frontal"] = (time.perf_counter() - ts) * 1e3
-    if cfg.mode in ("top_down", "both") or (cfg.mode == "auto" and not grasps):
-        attempted.append("top_down")
-        ts = time.perf_counter()
-        grasps += _plan_top_down(inp, frame, center, cfg, rejections)
-        timings["top_down"] = (time.perf_counter() - ts) * 1e3
+        revolved = _revolve(observed, cfg)
+        timings["revolve"] = (time.perf_counter() - ts) * 1e3
+        if revolved is not None:  # an upright round object: plan again with its unseen arc filled in
+            inp, frame, center, summary["revolved"] = revolved
+            # the plan now stands on the revolved cloud alone (the mirrored faces are not in it)
+            summary.update(n_inferred=summary["revolved"]["n_inferred"], completed_axes=[])
+            grasps = _plan_variants(inp, frame, center, cfg, rejections, attempted, timings)
     timings["total"] = (time.perf_counter() - t0) * 1e3
     return GraspPlan(grasps=grasps, rejections=rejections, attempted=attempted, object_center=center,
                      center_slices=n_slices, main_axis=frame.main_axis.copy(), timings_ms=timings,
-                     completion=completion.summary())
+                     completion=summary)
+
+
+def _plan_variants(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, cfg: GraspPlannerConfig,
+                   rejections: Rejections, attempted: list[str], timings: dict[str, float]) -> list[PlannedGrasp]:
+    """Frontal and/or top-down grasps as ``cfg.mode`` says ('auto': top-down only when frontal found
+    nothing); appends the variants run to ``attempted`` (once each) and their times to ``timings``."""
+    grasps: list[PlannedGrasp] = []
+    if cfg.mode in ("auto", "frontal", "both"):
+        ts = time.perf_counter()
+        grasps += _plan_frontal(inp, frame, center, cfg, rejections)
+        _note(attempted, timings, "frontal", ts)
+    if cfg.mode in ("top_down", "both") or (cfg.mode == "auto" and not grasps):
+        ts = time.perf_counter()
+        grasps += _plan_top_down(inp, frame, center, cfg, rejections)
+        _note(attempted, timings, "top_down", ts)
+    return grasps
+
+
+def _note(attempted: list[str], timings: dict[str, float], variant: str, since: float) -> None:
+    if variant not in attempted:
+        attempted.append(variant)
+    timings[variant] = timings.get(variant, 0.0) + (time.perf_counter() - since) * 1e3
+
+
+def _revolve(observed: PlanningInput, cfg: GraspPlannerConfig
+             ) -> tuple[PlanningInput, ObjectFrame, np.ndarray, dict[str, Any]] | None:
+    """The observed cloud of an upright round object with its unseen arc filled in about the fitted
+    vertical axis (revolve.py), its box frame and its turn centre (the axis at the box's mid-height);
+    None when the object is not round about a vertical axis or was seen all round."""
+    section = fit_vertical_axis(observed.xyz, observed.normals, observed.up, observed.offset,
+                                wall_angle_deg=cfg.side_face_angle_deg, tolerance=cfg.round_section_tolerance,
+                                min_seen_arc_deg=cfg.round_min_seen_arc_deg)
+    if section is None:
+        return None
+    rev = revolve_unseen_arc(observed.xyz, observed.normals, observed.up, observed.offset, section,
+                             wall_angle_deg=cfg.side_face_angle_deg)
+    if not rev.n_inferred:
+        return None
+    inp = replace(observed, xyz=rev.xyz, normals=rev.normals, heights=rev.xyz @ observed.up + observed.offset,
+                  n_observed=rev.n_observed)
+    frame = object_frame(inp.xyz, inp.up)
+    center = section.axis_point + float((frame.center - section.axis_point) @ inp.up) * inp.up
+    return inp, frame, center, rev.summary()
 
 
 def plan_grasps_for_cloud(cloud: PointCloud, table: Plane, config: GraspPlannerConfig | None = None

@@ -105,7 +105,9 @@ class GraspPlan:
     timings_ms: dict[str, float] = field(default_factory=dict)
     completion: dict[str, Any] = field(default_factory=dict)
     """What the planner inferred: per horizontal box axis, the face points seen at each end and whether
-    a hidden side face was mirrored in (services/grasp/completion.py)."""
+    a hidden side face was mirrored in (services/grasp/completion.py); under ``revolved``, when nothing
+    was found on that, the vertical axis an upright round object's unseen arc was filled about
+    (services/grasp/revolve.py)."""
 
     def __bool__(self) -> bool:
         return bool(self.grasps)
@@ -115,6 +117,8 @@ class GraspPlan:
         tried = "+".join(self.attempted) or "nothing"
         completed = self.completion.get("completed_axes") or []
         note = f" (hidden side {'+'.join(completed)} mirrored from the seen one)" if completed else ""
+        if self.completion.get("revolved"):
+            note += " (unseen arc filled about the round object's vertical axis)"
         if self.grasps:
             kinds = ", ".join(f"{g.kind}/{g.axis} rank {g.rank:.2f}" for g in self.grasps)
             return f"{len(self.grasps)} grasp(s) from {tried}: {kinds}{note}"

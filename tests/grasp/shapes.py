@@ -29,12 +29,16 @@ def table_plane() -> Plane:
     return Plane(normal=np.array([0.0, 0.0, 1.0]), offset=0.0, center=np.array([0.4, 0.0, 0.0]))
 
 
-def _finish(p: np.ndarray, n: np.ndarray, view_from, noise: float, rng) -> tuple[np.ndarray, np.ndarray]:
+def _finish(p: np.ndarray, n: np.ndarray, view_from, noise: float, rng, grazing: float = 0.0
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Keep what a camera of ``view_from`` sees: the cosine between the normal and the line of sight above
+    ``grazing`` (a depth camera returns nothing from surfaces seen nearly edge-on); then add noise."""
     if view_from is not None:
         cams = np.atleast_2d(np.asarray(view_from, float))
         keep = np.zeros(len(p), bool)
         for cam in cams:
-            keep |= np.einsum("ij,ij->i", n, cam - p) > 0
+            sight = cam - p
+            keep |= np.einsum("ij,ij->i", n, sight) > grazing * np.linalg.norm(sight, axis=1)
         p, n = p[keep], n[keep]
     if noise > 0:
         p = p + rng.normal(0.0, noise, p.shape)
@@ -42,7 +46,7 @@ def _finish(p: np.ndarray, n: np.ndarray, view_from, noise: float, rng) -> tuple
 
 
 def cylinder(radius: float, height: float, n: int = 20000, *, lying_along: np.ndarray | None = None,
-             xy=OBJECT_XY, view_from=None, noise: float = 0.0, seed: int = 0):
+             xy=OBJECT_XY, view_from=None, noise: float = 0.0, seed: int = 0, grazing: float = 0.0):
     """A closed cylinder. Standing (axis z, bottom on the table) unless ``lying_along`` gives a
     horizontal axis direction, then it lies on its side with the axis at height ``radius``."""
     rng = np.random.default_rng(seed)
@@ -72,7 +76,7 @@ def cylinder(radius: float, height: float, n: int = 20000, *, lying_along: np.nd
         R = np.column_stack([b, np.array([0.0, 0.0, 1.0]), a])  # local x->b, y->up, z->axis
         p = (p - [0, 0, height / 2]) @ R.T + np.array([xy[0], xy[1], radius])
         nn = nn @ R.T
-    return _finish(p, nn, view_from, noise, rng)
+    return _finish(p, nn, view_from, noise, rng, grazing)
 
 
 def box(size, n: int = 20000, *, yaw_deg: float = 0.0, xy=OBJECT_XY, view_from=None, noise: float = 0.0,
