@@ -7,7 +7,9 @@ and the reasons the other candidates were dropped.
 Pipeline: table-aligned box → a side face the scan poses could not see mirrored in from the seen one
 (completion.py), then per variant: central slice → candidate regions at both ends of the horizontal
 region axes → all-pairs GeoGrasp ranking → collision filter (table or object-below box, pad boxes,
-object points, inferred ones included) → poses. Everything after the first masks works on a few
+object points, inferred ones included) → poses. When that leaves no grasp and the object stands round on
+a vertical axis, the arc of wall no scan pose saw is filled about that axis (revolve.py) and the variants
+run again on the observed cloud plus that arc. Everything after the first masks works on a few
 thousand points at most, so a 20k-point cloud plans in milliseconds.
 """
 
@@ -120,7 +122,9 @@ def plan_grasps(cloud_xyz: Any, normals: Any, table: Plane,
 
     ``config.mode``: 'auto' runs frontal and falls back to top-down when frontal yields nothing;
     'frontal', 'top_down' or 'both' run what they say. Returns a :class:`GraspPlan` (never raises for a
-    well-formed cloud that merely has no grasp: the plan's ``rejections`` say why).
+    well-formed cloud that merely has no grasp: the plan's ``rejections`` say why). An empty plan on an
+    upright round object is planned once more with its unseen arc filled in (``complete_round_sections``);
+    the rejections then count both passes.
     """
     cfg = config or GraspPlannerConfig()
     t0 = time.perf_counter()
