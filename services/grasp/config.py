@@ -104,6 +104,10 @@ class GraspPlannerConfig:
     """An end of an axis is hidden when it has at most this fraction of the other end's face points."""
     min_side_face_points: int = 20
     """The seen end needs at least this many face points to be mirrored."""
+    drop_stray_points: bool = True
+    """When the cloud gives no grasp and holds stray returns (a point with no neighbours at the cloud's own
+    spacing, stray.py), drop them and plan again: one flying pixel beyond a face moves the box frame's end
+    and hides that face from the completion. False: the plan stays empty."""
     complete_round_sections: bool = True
     """When the cloud (mirror completion included) gives no grasp and the object stands round on a vertical
     axis (a can, a jar, a bottle), fill the arc of wall no scan pose saw by turning the seen wall about that

@@ -41,6 +41,7 @@ from services.grasp.ranking import RankedPair, rank_region_pair
 from services.grasp.result import GraspPlan, PlannedGrasp, Rejections
 from services.grasp.revolve import fit_vertical_axis, revolve_unseen_arc
 from services.grasp.roll import roll_poses, round_section
+from services.grasp.stray import stray_mask
 
 MIN_POINTS = 10
 
@@ -122,13 +123,52 @@ def plan_grasps(cloud_xyz: Any, normals: Any, table: Plane,
 
     ``config.mode``: 'auto' runs frontal and falls back to top-down when frontal yields nothing;
     'frontal', 'top_down' or 'both' run what they say. Returns a :class:`GraspPlan` (never raises for a
-    well-formed cloud that merely has no grasp: the plan's ``rejections`` say why). An empty plan on an
-    upright round object is planned once more with its unseen arc filled in (``complete_round_sections``);
-    the rejections then count both passes.
+    well-formed cloud that merely has no grasp: the plan's ``rejections`` say why). An empty plan is
+    planned once more without its stray returns (``drop_stray_points``, stray.py; that pass's rejections
+    replace the first's only when it finds a grasp), then, on an upright round object, with its unseen arc
+    filled in (``complete_round_sections``; the rejections then count both passes).
     """
     cfg = config or GraspPlannerConfig()
     t0 = time.perf_counter()
-    inp = observed = validate_inputs(cloud_xyz, normals, table)
+    observed = validate_inputs(cloud_xyz, normals, table)
+    rejections = Rejections(max_examples=cfg.max_examples)
+    attempted: list[str] = []
+    timings: dict[str, float] = {}
+    grasps, frame, center, n_slices, summary = _plan_cloud(observed, cfg, rejections, attempted, timings)
+    if not grasps and cfg.drop_stray_points:
+        stray = stray_mask(observed.xyz)
+        if stray.any():  # a lone return beyond a face spoils the box frame: plan again without it
+            keep = ~stray
+            observed = replace(observed, xyz=observed.xyz[keep], normals=observed.normals[keep],
+                               heights=observed.heights[keep])
+            retry = Rejections(max_examples=cfg.max_examples)
+            again = _plan_cloud(observed, cfg, retry, attempted, timings)
+            if again[0]:  # the plan and its rejections are the retry's; else the first pass says why
+                grasps, frame, center, n_slices, summary = again
+                rejections = retry
+                summary["stray_points_dropped"] = int(stray.sum())
+    if not grasps and cfg.complete_round_sections:
+        ts = time.perf_counter()
+        revolved = _revolve(observed, cfg)
+        timings["revolve"] = (time.perf_counter() - ts) * 1e3
+        if revolved is not None:  # an upright round object: plan again with its unseen arc filled in
+            inp, frame, center, revolved_summary = revolved
+            # the plan now stands on the revolved cloud alone (the mirrored faces are not in it)
+            summary.update(revolved=revolved_summary, n_inferred=revolved_summary["n_inferred"], completed_axes=[])
+            grasps = _plan_variants(inp, frame, center, cfg, rejections, attempted, timings)
+    timings["total"] = (time.perf_counter() - t0) * 1e3
+    return GraspPlan(grasps=grasps, rejections=rejections, attempted=attempted, object_center=center,
+                     center_slices=n_slices, main_axis=frame.main_axis.copy(), timings_ms=timings,
+                     completion=summary)
+
+
+def _plan_cloud(observed: PlanningInput, cfg: GraspPlannerConfig, rejections: Rejections, attempted: list[str],
+                timings: dict[str, float]
+                ) -> tuple[list[PlannedGrasp], ObjectFrame, np.ndarray, int, dict[str, Any]]:
+    """One planning pass over an observed cloud: its box frame, hidden sides mirrored in, the turn centre,
+    then the variants. Returns (grasps, frame, centre, centre slices, completion summary)."""
+    t0 = time.perf_counter()
+    inp = observed
     frame = object_frame(inp.xyz, inp.up)
     completion = complete_hidden_sides(frame, inp.xyz, inp.normals, inp.up, band=cfg.side_face_band,
                                        face_angle_deg=cfg.side_face_angle_deg, hidden_ratio=cfg.hidden_side_ratio,
@@ -146,29 +186,13 @@ def plan_grasps(cloud_xyz: Any, normals: Any, table: Plane,
                                                     cfg.center_min_points, rng)
     center_local[completion.completed_cols] = 0.0
     center = frame.to_base(center_local[None, :])[0]
-    t1 = time.perf_counter()
-    rejections = Rejections(max_examples=cfg.max_examples)
-    attempted: list[str] = []
-    timings = {"prepare": (t1 - t0) * 1e3}
+    timings["prepare"] = timings.get("prepare", 0.0) + (time.perf_counter() - t0) * 1e3
     for side in completion.incomplete_sides:
         rejections.add("side_not_seen", example={
             "axis": side.axis, "status": side.status, "face_points": list(side.points),
             "why": "an antipodal pair on this axis needs a face at both ends; no scan pose saw one of them"})
     grasps = _plan_variants(inp, frame, center, cfg, rejections, attempted, timings)
-    summary = completion.summary()
-    if not grasps and cfg.complete_round_sections:
-        ts = time.perf_counter()
-        revolved = _revolve(observed, cfg)
-        timings["revolve"] = (time.perf_counter() - ts) * 1e3
-        if revolved is not None:  # an upright round object: plan again with its unseen arc filled in
-            inp, frame, center, summary["revolved"] = revolved
-            # the plan now stands on the revolved cloud alone (the mirrored faces are not in it)
-            summary.update(n_inferred=summary["revolved"]["n_inferred"], completed_axes=[])
-            grasps = _plan_variants(inp, frame, center, cfg, rejections, attempted, timings)
-    timings["total"] = (time.perf_counter() - t0) * 1e3
-    return GraspPlan(grasps=grasps, rejections=rejections, attempted=attempted, object_center=center,
-                     center_slices=n_slices, main_axis=frame.main_axis.copy(), timings_ms=timings,
-                     completion=summary)
+    return grasps, frame, center, n_slices, completion.summary()
 
 
 def _plan_variants(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, cfg: GraspPlannerConfig,
