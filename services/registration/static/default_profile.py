@@ -288,10 +288,11 @@ def _prepare(scan: Scan, frame: RGBDFrame, cfg: StaticConfig, window: ImageWindo
         check=downsample(pcd, cfg.check_voxel, normals=False),
         intrinsic=pinhole(frame, cfg.odometry_step, window),
         make_image=lambda: rgbd_image(frame, step=cfg.odometry_step, depth_min=cfg.depth_min, depth_max=cfg.depth_max,
-                                      window=window, backend=cfg.odometry_backend),
+                                      window=window, backend=cfg.odometry_backend,
+                                      levels=len(cfg.odometry_iterations)),
         make_seed_image=None if cfg.odometry_seed_iterations is None else lambda: (
             rgbd_image(frame, step=seed_step, depth_min=cfg.depth_min, depth_max=cfg.depth_max, window=window,
-                       backend=cfg.odometry_backend),
+                       backend=cfg.odometry_backend, levels=len(cfg.odometry_seed_iterations)),
             pinhole(frame, seed_step, window),
         ),
     )

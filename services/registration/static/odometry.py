@@ -19,12 +19,12 @@ import open3d as o3d
 from common.messages import RGBDFrame
 
 from .odometry_window import ImageWindow
-from .tensor_odometry import tensor_rgbd_image, tensor_rgbd_odometry
+from .tensor_odometry import TensorPyramid, tensor_rgbd_image, tensor_rgbd_odometry
 
 odo = o3d.pipelines.odometry
 
 #: An odometry image of either backend.
-OdometryImage = o3d.geometry.RGBDImage | o3d.t.geometry.RGBDImage
+OdometryImage = o3d.geometry.RGBDImage | TensorPyramid
 
 
 def _window(image: np.ndarray, window: ImageWindow | None) -> np.ndarray:
@@ -32,11 +32,13 @@ def _window(image: np.ndarray, window: ImageWindow | None) -> np.ndarray:
 
 
 def rgbd_image(frame: RGBDFrame, *, step: int, depth_min: float, depth_max: float,
-               window: ImageWindow | None = None, backend: str = "legacy") -> OdometryImage:
+               window: ImageWindow | None = None, backend: str = "legacy", levels: int = 1) -> OdometryImage:
     """The frame as an Open3D RGBD image (intensity + float depth in metres), cut to ``window`` (None: the whole
-    image) and decimated by ``step``; for the ``tensor`` backend prepared as ``tensor_odometry`` needs it."""
+    image) and decimated by ``step``; for the ``tensor`` backend its ``levels``-level pyramid, prepared as
+    ``tensor_odometry`` needs it (the legacy odometry builds its pyramid itself)."""
     if backend == "tensor":
-        return tensor_rgbd_image(frame, step=step, depth_min=depth_min, depth_max=depth_max, window=window)
+        return tensor_rgbd_image(frame, step=step, depth_min=depth_min, depth_max=depth_max, levels=levels,
+                                 window=window)
     depth = _window(np.asarray(frame.depth), window)[::step, ::step].astype(np.float32) * np.float32(frame.depth_scale)
     depth[depth < depth_min] = 0.0
     color = np.ascontiguousarray(_window(np.asarray(frame.color), window)[::step, ::step])
