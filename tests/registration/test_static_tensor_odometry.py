@@ -25,9 +25,11 @@ from services.registration.static.tensor_odometry import (
 )
 
 TENSOR = StaticConfig(odometry_backend="tensor")
+LEGACY = StaticConfig(odometry_backend="legacy")
 
 
-def test_an_unknown_backend_is_refused():
+def test_the_tensor_backend_is_the_default_and_an_unknown_backend_is_refused():
+    assert StaticConfig().odometry_backend == "tensor"
     with pytest.raises(ValueError, match="odometry_backend"):
         StaticConfig(odometry_backend="gpu")
 
@@ -67,7 +69,7 @@ def milk_pairs():
     from bench.scenario import simulated_views
 
     frames = simulated_views("milk", views=1, scans_per_view=3, profile="realistic", seed=0)[0]
-    legacy_cfg = StaticConfig()
+    legacy_cfg = LEGACY
     scans = load_scans(frames, legacy_cfg)
     seed_base = transform_points(scans[0].T_believed, np.array([[0.0, 0.0, centre_depth(frames[0], legacy_cfg)]]))[0]
     dp.crop_to_roi(scans, seed_base, legacy_cfg)
@@ -80,7 +82,7 @@ def test_the_tensor_odometry_lands_where_the_legacy_lands(milk_pairs, j):
     neighbourhood and agree to a few tenths of a millimetre. Started in the wrong direction (the inverse, a
     target-to-source start) the tensor pass lands millimetres away: the agreement is not slack."""
     frames, legacy, tensor = milk_pairs
-    cfg = StaticConfig()
+    cfg = LEGACY
     prior = invert(frames[0].T_base_camera) @ frames[j].T_base_camera
     true = invert(frames[0].T_base_camera_true) @ frames[j].T_base_camera_true
     start = dp.reverse_seed(legacy[j], legacy[0], prior, cfg)
