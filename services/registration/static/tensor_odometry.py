@@ -37,7 +37,7 @@ import open3d as o3d
 
 from common.messages import RGBDFrame
 
-from .odometry_window import ImageWindow
+from .odometry_window import ImageWindow, cut_to
 
 o3c = o3d.core
 t_odo = o3d.t.pipelines.odometry
@@ -75,10 +75,6 @@ def _halve(a: np.ndarray) -> np.ndarray:
     return ((a[0::2, 0::2] + a[0::2, 1::2] + a[1::2, 0::2] + a[1::2, 1::2]) * np.float32(0.25)).astype(np.float32)
 
 
-def _window(image: np.ndarray, window: ImageWindow | None) -> np.ndarray:
-    return image if window is None else image[window.y0 : window.y1, window.x0 : window.x1]
-
-
 def _level(gray: np.ndarray, depth: np.ndarray) -> o3d.t.geometry.RGBDImage:
     depth = np.where(np.isfinite(depth), depth, np.float32(0.0)).astype(np.float32)
     color = np.ascontiguousarray(np.repeat(gray[:, :, None], 3, axis=2))
@@ -90,10 +86,10 @@ def tensor_rgbd_image(frame: RGBDFrame, *, step: int, depth_min: float, depth_ma
                       window: ImageWindow | None = None) -> TensorPyramid:
     """The frame's ``levels``-level odometry pyramid, prepared as the legacy odometry prepares its images (module
     docstring), cut to ``window`` (None: the whole image) and decimated by ``step`` first."""
-    depth = _window(np.asarray(frame.depth), window)[::step, ::step].astype(np.float32) * np.float32(frame.depth_scale)
+    depth = cut_to(np.asarray(frame.depth), window)[::step, ::step].astype(np.float32) * np.float32(frame.depth_scale)
     depth[(depth < depth_min) | (depth > depth_max) | (depth <= 0)] = np.nan
     depth = _gaussian3(depth)
-    rgb = _window(np.asarray(frame.color), window)[::step, ::step].astype(np.float32)
+    rgb = cut_to(np.asarray(frame.color), window)[::step, ::step].astype(np.float32)
     gray = _gaussian3((rgb @ _LUMA) / np.float32(255.0))
     valid = np.isfinite(depth)
     mean = float(gray[valid].mean()) if valid.any() else float(gray.mean())
