@@ -25,7 +25,7 @@ from services.registration.cloud import downsample, to_o3d
 
 from . import pairwise as pw
 from .config import StaticConfig
-from .odometry import pinhole, rgbd_image, rgbd_odometry
+from .odometry import OdometryImage, pinhole, rgbd_image, rgbd_odometry
 from .odometry_window import ImageWindow, odometry_window
 from .plausibility import correction_bound, implausibility, plausible
 from .posegraph import optimise
@@ -42,19 +42,19 @@ class PriorScan:
     pcd: o3d.geometry.PointCloud  # the ROI-cropped scan in its camera frame
     check: o3d.geometry.PointCloud  # ``check_voxel`` copy the pair check measures on
     intrinsic: o3d.camera.PinholeCameraIntrinsic  # of the decimated image
-    make_image: Callable[[], o3d.geometry.RGBDImage] = field(repr=False)
-    make_seed_image: Callable[[], tuple[o3d.geometry.RGBDImage, o3d.camera.PinholeCameraIntrinsic]] | None = field(
+    make_image: Callable[[], OdometryImage] = field(repr=False)
+    make_seed_image: Callable[[], tuple[OdometryImage, o3d.camera.PinholeCameraIntrinsic]] | None = field(
         default=None, repr=False
     )
     _table_free: tuple[o3d.geometry.PointCloud, o3d.geometry.PointCloud] | None = field(default=None, repr=False)
 
     @cached_property
-    def image(self) -> o3d.geometry.RGBDImage:
+    def image(self) -> OdometryImage:
         """The decimated RGB-D image for odometry (built on first use)."""
         return self.make_image()
 
     @cached_property
-    def seed_image(self) -> tuple[o3d.geometry.RGBDImage, o3d.camera.PinholeCameraIntrinsic]:
+    def seed_image(self) -> tuple[OdometryImage, o3d.camera.PinholeCameraIntrinsic]:
         """The coarser RGB-D image (and its intrinsics) of the reverse seed pass (built on first use)."""
         if self.make_seed_image is None:
             raise ValueError("this scan was prepared without a seed image (odometry_seed_iterations is None)")
@@ -125,6 +125,7 @@ def _odometry(src: PriorScan, tgt: PriorScan, init: np.ndarray, cfg: StaticConfi
         depth_min=cfg.depth_min,
         depth_max=cfg.depth_max,
         hybrid=cfg.odometry_hybrid,
+        backend=cfg.odometry_backend,
     )
 
 
@@ -150,6 +151,7 @@ def reverse_seed(src: PriorScan, tgt: PriorScan, prior: np.ndarray, cfg: StaticC
         depth_min=cfg.depth_min,
         depth_max=cfg.depth_max,
         hybrid=cfg.odometry_hybrid,
+        backend=cfg.odometry_backend,
     )
     if not ok:
         return prior
@@ -286,9 +288,11 @@ def _prepare(scan: Scan, frame: RGBDFrame, cfg: StaticConfig, window: ImageWindo
         check=downsample(pcd, cfg.check_voxel, normals=False),
         intrinsic=pinhole(frame, cfg.odometry_step, window),
         make_image=lambda: rgbd_image(frame, step=cfg.odometry_step, depth_min=cfg.depth_min, depth_max=cfg.depth_max,
-                                      window=window),
+                                      window=window, backend=cfg.odometry_backend,
+                                      levels=len(cfg.odometry_iterations)),
         make_seed_image=None if cfg.odometry_seed_iterations is None else lambda: (
-            rgbd_image(frame, step=seed_step, depth_min=cfg.depth_min, depth_max=cfg.depth_max, window=window),
+            rgbd_image(frame, step=seed_step, depth_min=cfg.depth_min, depth_max=cfg.depth_max, window=window,
+                       backend=cfg.odometry_backend, levels=len(cfg.odometry_seed_iterations)),
             pinhole(frame, seed_step, window),
         ),
     )

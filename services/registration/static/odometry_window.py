@@ -43,6 +43,11 @@ class ImageWindow:
         return self.y1 - self.y0
 
 
+def cut_to(image: np.ndarray, window: ImageWindow | None) -> np.ndarray:
+    """``image`` (rows x columns [x channels]) cut to ``window``; None: the whole image."""
+    return image if window is None else image[window.y0 : window.y1, window.x0 : window.x1]
+
+
 def pyramid_alignment(cfg: StaticConfig) -> int:
     """Full-resolution pixels per pixel of the coarsest pyramid level of either odometry pass (forward and reverse
     seed): a window corner on a multiple of it keeps every level's pixels those of the uncropped image."""
