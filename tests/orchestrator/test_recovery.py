@@ -21,7 +21,7 @@ from services.grasp.planner import plan_grasps
 from services.grasp.service import GraspService
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.machine import Acquisition, State
-from services.orchestrator.recovery import grasp_order, lies_down, plan_mode
+from services.orchestrator.recovery import grasp_order, lies_down, on_an_edge, plan_mode, topples_if_dropped
 from services.session_store import SessionStore
 from tests.grasp.shapes import cylinder, table_plane
 from tests.orchestrator.arm_cell import ArmOnlyCell
@@ -187,3 +187,50 @@ def test_the_order_of_grasps_after_a_slip_and_on_a_lying_object():
     assert plan_mode("auto", True, []) == plan_mode("auto", False, ["frontal"]) == "both"
     assert plan_mode("auto", False, []) == "auto" and plan_mode("top_down", True, []) == "top_down"
     assert lies_down(xyz, 0.06) and not lies_down(xyz, 0.19)
+
+
+def _box_from_the_arm_side(size: tuple[float, float, float], yaw_deg: float):  # noqa: ANN202
+    """A box at 0.60 m turned ``yaw_deg``, seen by the three scan poses of a view, and the real planner's grasps
+    on it (the service's settings: edge-to-face pairs kept)."""
+    from tests.grasp import shapes as S
+
+    center = np.array([0.60, 0.0, 0.0])
+    cams = [center + 0.38 * np.array([-np.cos(np.radians(a)), np.sin(np.radians(a)), 0.0]) + [0, 0, 0.3]
+            for a in (-22.0, 0.0, 22.0)]
+    xyz, n = S.box(size, 12000, xy=center[:2], yaw_deg=yaw_deg, view_from=cams, noise=0.0005)
+    plan = plan_grasps(xyz, n, S.table_plane(), replace(GraspService.planner_config(), mode="auto"))
+    return plan.to_messages(), xyz, center
+
+
+@pytest.mark.parametrize("yaw", [-70.0, -30.0, 20.0])
+def test_a_tall_box_is_gripped_across_two_faces_before_on_an_edge(yaw):
+    """A 6.9 x 9.3 x 17.1 cm box turned away from the line from the base: the planner's first grasp closes on
+    one face and one vertical edge. Closing on the edge turns and pushes the box in the hand; one such grasp
+    slipped in MuJoCo and the box fell over out of the arm's reach. A grasp across two faces goes first (at
+    -70 degrees the hold and the approach alone would put the edge grasp first)."""
+    from services.orchestrator.planning import radial_offset_deg
+
+    grasps, xyz, center = _box_from_the_arm_side((0.069, 0.093, 0.171), yaw)
+    assert on_an_edge(grasps[0]) and not all(on_an_edge(g) for g in grasps)  # what the planner offers
+    assert topples_if_dropped(xyz, 0.171)
+    side = [abs(radial_offset_deg(g, center)) > 50.0 for g in grasps]  # as the state machine asks
+    order = grasp_order(grasps, False, [], xyz, center, 0.171, side)
+    assert not on_an_edge(grasps[order[0]])
+    for a in (True, False):  # among grasps approached alike (side ones still go last), faces before edges
+        edges = [on_an_edge(grasps[i]) for i in order if side[i] == a]
+        assert edges == sorted(edges)
+
+
+def test_a_squat_box_keeps_its_edge_grasps_in_the_planners_order():
+    """6 cm tall, it stays standing if it slips and is re-grasped: the order is the planner's and the hold's."""
+    grasps, xyz, center = _box_from_the_arm_side((0.069, 0.093, 0.06), 20.0)
+    assert on_an_edge(grasps[0])
+    assert not topples_if_dropped(xyz, 0.06)
+    assert grasp_order(grasps, False, [], xyz, center, 0.06)[0] == 0
+
+
+def test_an_edge_is_a_contact_normal_far_off_the_grasp_line():
+    g = _grasp("frontal", 0.05)
+    assert not on_an_edge(g)  # no normals reported: taken as faces
+    assert not on_an_edge(replace(g, metrics={"cos_alpha1": 0.99, "cos_alpha2": 0.9}))
+    assert on_an_edge(replace(g, metrics={"cos_alpha1": 0.43, "cos_alpha2": 0.9}))  # the box that slipped
