@@ -88,7 +88,8 @@ const ink=()=>{const d=cv.getContext('2d').getImageData(0,0,cv.width,cv.height).
   for(let i=0;i<d.length;i+=4)if(d[i]+d[i+1]+d[i+2]<700)k++;return k;};
 const r=cv.getBoundingClientRect(),ev=(t,x,y)=>cv.dispatchEvent(new PointerEvent(t,{clientX:r.left+x,
   clientY:r.top+y,pointerId:1,bubbles:true}));
-const a=snap(),inkA=ink();ev('pointerdown',300,200);ev('pointermove',390,230);ev('pointerup',390,230);const b=snap(),inkB=ink();
+const a=snap(),inkA=ink();ev('pointerdown',300,200);ev('pointermove',390,230);ev('pointerup',390,230);
+const b=snap(),inkB=ink();
 cv.dispatchEvent(new WheelEvent('wheel',{deltaY:-300,bubbles:true,cancelable:true}));const c=snap(),inkC=ink();
 el.querySelector("button[data-mode='color']").click();const d=snap();
 el.querySelector('button:not([data-mode]):not([data-zoom])').click();const e=snap();
