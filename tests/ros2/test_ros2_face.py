@@ -232,7 +232,12 @@ def test_a_scan_started_and_stopped_through_the_ros2_services_and_its_frames_on_
         assert session_dir.parent == (tmp / "sessions").resolve()
         again, _ = _call(group.session, "/objscan/start_scan", 9)  # one acquisition at a time: a typed refusal
         assert not again.success and again.message.startswith("busy:"), again
-        color = listener.wait("/objscan/camera/color/image_raw", 1, timeout=90)[0]
+        try:
+            color = listener.wait("/objscan/camera/color/image_raw", 1, timeout=90)[0]
+        except AssertionError as exc:  # say what the cell did meanwhile: the run's statuses, its services' logs
+            raise AssertionError(f"{exc}; {len(frames)} frames on the tap; statuses "
+                                 f"{[json.loads(m.data) for m in listener.decoded('/objscan/status')]}\n"
+                                 + _log_tails(tmp / "logs")) from exc
         depth = listener.wait("/objscan/camera/depth/image_rect_raw", 1)[0]
         info = listener.wait("/objscan/camera/color/camera_info", 1)[0]
         resp, _ = _call(group.session, "/objscan/stop_scan", 8)
@@ -260,6 +265,12 @@ def test_a_scan_started_and_stopped_through_the_ros2_services_and_its_frames_on_
     np.testing.assert_allclose(info.k, [K.fx, 0, K.cx, 0, K.fy, K.cy, 0, 0, 1])
     assert (info.width, info.height, info.header.frame_id) == (K.width, K.height, "camera")
     assert color.header.stamp.sec + color.header.stamp.nanosec * 1e-9 == pytest.approx(f.stamp, abs=1e-6)
+
+
+def _log_tails(log_dir: Path, lines: int = 15) -> str:
+    """The last lines of every service's log, for a failure message."""
+    return "\n".join(f"--- {p.name}\n" + "\n".join(p.read_text(errors="replace").splitlines()[-lines:])
+                     for p in sorted(log_dir.glob("*.log")))
 
 
 def test_view_and_model_clouds_decode_to_their_points_and_colours(cell):
