@@ -10,37 +10,9 @@ session keeps ``T_base_object`` (this frame in the robot's ``base`` at view 0) t
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import ConvexHull, QhullError
 
+from common.footprint import min_area_rectangle
 from services.export.errors import ExportInputError
-
-
-def min_area_rectangle(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """(centre (2,), unit long-side direction (2,), angle-free sizes ignored) of the smallest-area rectangle.
-
-    Rotating calipers on the convex hull: the optimal rectangle has a side on a hull edge. Returns the
-    rectangle's centre, the direction of its longer side and its area.
-    """
-    pts = np.asarray(xy, dtype=np.float64)
-    try:
-        hull = pts[ConvexHull(pts).vertices]
-    except (QhullError, ValueError):
-        raise ExportInputError("the model's footprint is degenerate (too few or collinear points)",
-                               code="bad_model") from None
-    edges = np.roll(hull, -1, axis=0) - hull
-    angles = np.unique(np.mod(np.arctan2(edges[:, 1], edges[:, 0]), np.pi / 2))
-    best = (np.inf, np.zeros(2), np.array([1.0, 0.0]))
-    for a in angles:
-        u = np.array([np.cos(a), np.sin(a)])
-        v = np.array([-u[1], u[0]])
-        pu, pv = hull @ u, hull @ v
-        lu, lv = pu.max() - pu.min(), pv.max() - pv.min()
-        area = lu * lv
-        if area < best[0]:
-            centre = u * (pu.max() + pu.min()) / 2 + v * (pv.max() + pv.min()) / 2
-            best = (area, centre, u if lu >= lv else v)
-    area, centre, long_dir = best
-    return centre, long_dir, float(area)
 
 
 def object_frame(xyz: np.ndarray, table_normal: np.ndarray, table_offset: float) -> np.ndarray:
@@ -60,7 +32,11 @@ def object_frame(xyz: np.ndarray, table_normal: np.ndarray, table_offset: float)
     x0 /= np.linalg.norm(x0)
     y0 = np.cross(z, x0)
     xy = np.column_stack([pts @ x0, pts @ y0])
-    centre, long_dir, _ = min_area_rectangle(xy)
+    centre, axes, sides = min_area_rectangle(xy)
+    if not sides.min() > 1e-9:
+        raise ExportInputError("the model's footprint is degenerate (too few or collinear points)",
+                               code="bad_model")
+    long_dir = axes[:, int(np.argmax(sides))]
     x = long_dir[0] * x0 + long_dir[1] * y0
     x /= np.linalg.norm(x)
     # keep x pointing away from the robot (base +x) when the long side allows either sign: reproducible

@@ -30,8 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from common.footprint import min_area_rectangle
 from common.messages import Grasp
-from services.grasp.boxes import min_area_rectangle
 from services.grasp.hold import HoldModel, estimate_mass, hold_ratio
 
 #: A footprint at least this many times longer than the object is tall: the object lies down.
