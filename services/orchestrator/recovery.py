@@ -33,6 +33,7 @@ import numpy as np
 from common.footprint import min_area_rectangle
 from common.messages import Grasp
 from services.grasp.hold import HoldModel, estimate_mass, hold_ratio
+from services.grasp.stray import stray_mask
 
 #: A footprint at least this many times longer than the object is tall: the object lies down.
 LYING_RATIO = 1.6
@@ -63,11 +64,13 @@ def lies_down(xyz: np.ndarray, height: float) -> bool:
 
 def topples_if_dropped(xyz: np.ndarray, height: float) -> bool:
     """Whether the object is tall for its footprint (``TALL_RATIO`` times its thinnest side): a slip drops it
-    over instead of back onto its base."""
+    over instead of back onto its base. Stray returns (``stray_mask``) are left out of the footprint: one
+    speck beside a thin box would otherwise make it look squat."""
     pts = np.asarray(xyz, float)
     if height <= 0 or len(pts) < 3:
         return False
-    _, _, sides = min_area_rectangle(pts[:, :2])
+    kept = pts[~stray_mask(pts)]
+    _, _, sides = min_area_rectangle((kept if len(kept) >= 3 else pts)[:, :2])
     thinnest = float(np.min(sides))
     return thinnest > 0 and height >= TALL_RATIO * thinnest
 
