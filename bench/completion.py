@@ -121,7 +121,7 @@ def outcome(journal: dict[str, Any]) -> dict[str, Any]:
     out: dict[str, Any] = {"status": journal.get("status"),
                            "recoveries_executed": {k: int(counters.get(k, 0)) for k in
                                                    ("rescans", "slips", "topple_restarts", "regrasps",
-                                                    "repositions", "lay_downs")}}
+                                                    "repositions", "lay_downs", "pushes")}}
     if journal.get("status") == "done":
         out["chamfer_mm"] = (journal.get("accuracy") or {}).get("chamfer_mm")
         return out

@@ -200,6 +200,7 @@ class AcquisitionConfig:
     topple_height_tol_m: float = 0.02
     topple_height_rel: float = 0.25
     max_topple_restarts: int = 1
+    max_pushes: int = 2  # an object no pick reaches turned on the table by a push, at most this often (push.py)
     evaluate: bool = True  # compare with ground truth when the cell knows it (sim)
     # pair registrations during the acquisition (services/orchestrator/incremental.py); off: all at the end
     incremental: bool = True
@@ -226,6 +227,7 @@ class AcquisitionConfig:
             raise _fail("dynamic_config", "must be a map", self.dynamic_config)
         _number("max_grasp_attempts", self.max_grasp_attempts, 1, 1000, integer=True)
         _number("max_rescans", self.max_rescans, 0, 100, integer=True)
+        _number("max_pushes", self.max_pushes, 0, 10, integer=True)
         if not isinstance(self.pose_accuracy, dict):
             raise _fail("pose_accuracy", "must be a map", self.pose_accuracy)
         if self.pose_accuracy:

@@ -31,6 +31,7 @@ class Counters:
     regrasps: int = 0  # regrasp strategies executed (services/orchestrator/regrasp.py)
     repositions: int = 0  # pick-and-places without a turn back to a favoured spot (reposition.py)
     lay_downs: int = 0  # tall objects laid on their side to be scanned lying (lay_down.py)
+    pushes: int = 0  # objects no pick reached, turned on the table by a push (push.py)
 
     def to_dict(self) -> dict[str, int]:
         return dataclasses.asdict(self)
@@ -72,6 +73,7 @@ class Journal:
     topple_restarts: int = 0
     regrasps: dict[str, list[dict[str, Any]]] = field(default_factory=dict)  # view -> regrasp strategies tried
     laid_down: dict[str, Any] | None = None  # the object was laid on its side: where, how, from which view
+    pushes: list[dict[str, Any]] = field(default_factory=list)  # pushes executed: which, from which view
     model_path: str | None = None
     model_ready_s_after_last_view: float | None = None
     accuracy: dict[str, float] | None = None

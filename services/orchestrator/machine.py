@@ -66,6 +66,7 @@ from services.orchestrator.planning import (
     radial_offset_deg,
     turn_sequences,
 )
+from services.orchestrator.push_step import try_push
 from services.orchestrator.recovery import grasp_order, lies_down, plan_mode
 from services.orchestrator.regrasp import (
     RELOCATABLE_STEPS,
@@ -445,6 +446,10 @@ class Acquisition:
             out.append("pitched turn (not executable)")
         if self.j.topple_restarts:
             out.append(f"restart after topple x{self.j.topple_restarts}")
+        if self.j.pushes:
+            out.append(f"pushed round x{len(self.j.pushes)}")
+        elif any(d.get("what") == "no push executable" and d.get("view") == k for d in self.j.decisions):
+            out.append("push (not executable)")
         if (self.j.laid_down or {}).get("state") == "done":
             out.append("laid on its side")
         elif any(d.get("what") == "no lay-down executable" and d.get("view") == k for d in self.j.decisions):
@@ -700,6 +705,9 @@ class Acquisition:
             laid = await try_lay_down(self, k, view, (box_c, box_e), failures)  # too tall to turn standing
             if laid is not None:
                 return laid
+            pushed = await try_push(self, k, view, failures)  # no pick reaches it: turn it on the table
+            if pushed is not None:
+                return pushed
         self._plan = None
         if self.j.grasp_mode != "top_down":
             self.j.grasp_mode = "top_down"

@@ -15,10 +15,14 @@ all come from the contact dynamics. The seed only perturbs the physical paramete
 know exactly (friction and mass within ``*_jitter``); MuJoCo itself is deterministic, so one seed gives
 one outcome.
 
+A closed hand that moves through the object pushes it (``push``): the twin runs it for every set-point
+of such a sweep, continuing one simulation while consecutive set-points follow on, so the object slides,
+turns or tips as the pads drive it.
+
 Not simulated: the arm's links and the palm (the grasp planner keeps them clear), the carry between
 the lift and the set-down (the in-hand pose found after the lift is kept while the wrist turns), and
-the approach (the geometric checker still rejects pads that would hit the table or the object on the
-way in, ``gripper.GraspChecker``).
+the approach of an open hand (the geometric checker still rejects pads that would hit the table or the
+object on the way in, ``gripper.GraspChecker``).
 """
 
 from __future__ import annotations
@@ -61,6 +65,7 @@ class PhysicsConfig:
     collision: str = "auto"  # "auto" (hull if nearly convex, else coacd), "coacd" (decomposition, cached), "hull"
     topple_tilt_deg: float = 30.0  # an object resting tilted more than this has toppled
     mass: float = 0.0  # kg: the object's mass (its inertia scaled to match); 0 = density x its closed volume
+    push_speed: float = 0.03  # m/s a closed hand sweeping through the object moves at (the arm's approach speed)
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -155,6 +160,11 @@ class PhysicsScene:
         self._pad_geoms = {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, n) for n in ("left_pad", "right_pad")}
         self._obj_geoms = {g for g in range(m.ngeom) if m.geom_bodyid[g] == self._obj}
         self._lock = threading.Lock()
+        # the push under way: its simulation, where it left the hand and the object (``push``)
+        self._sweep: tuple[mujoco.MjData, np.ndarray, np.ndarray] | None = None
+        pts = np.vstack(self.parts)
+        self._centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+        self._radius = float(np.linalg.norm(pts - self._centre, axis=1).max())
 
     @property
     def mass(self) -> float:
@@ -405,6 +415,54 @@ class PhysicsScene:
             msg = (f"came to rest tilted {tilt:.0f} deg" + (" (toppled)" if toppled else "")
                    + f"; bounced {bounce * 1000:.1f} mm")
             return PhysicsSetDown(T_end, tilt, toppled, bounce, settled, msg)
+
+    def sweeps_near(self, T_base_object: np.ndarray, T_from: np.ndarray, T_to: np.ndarray) -> bool:
+        """Whether the pads, moving on the straight line from ``T_from`` to ``T_to``, come near the object
+        resting at ``T_base_object`` (its bounding sphere grown by the pads' half diagonal): cheap, so the
+        twin runs ``push`` only where a sweep can touch it."""
+        s = self.spec
+        reach = 0.5 * float(np.linalg.norm([s.pad_length, 2 * s.pad_thickness, s.pad_height])) + 0.005
+        c = T_base_object[:3, :3] @ self._centre + T_base_object[:3, 3]
+        a, b = np.asarray(T_from, float)[:3, 3], np.asarray(T_to, float)[:3, 3]
+        ab = b - a
+        t = float(np.clip((c - a) @ ab / (ab @ ab), 0.0, 1.0)) if ab @ ab > 0 else 0.0
+        return float(np.linalg.norm(a + t * ab - c)) < self._radius + reach
+
+    def push(self, T_base_object: np.ndarray, T_from: np.ndarray, T_to: np.ndarray, opening: float,
+             rng: np.random.Generator | None = None) -> np.ndarray:
+        """Where the object resting at ``T_base_object`` is once the hand, pads ``opening`` apart, has moved
+        on a straight line from ``T_from`` to ``T_to`` at ``push_speed``: pushed, turned or tipped by the
+        pads, or left where it was. A push continues the previous one's simulation (the object's motion
+        carries on) when it starts where that one left hand and object; otherwise it starts at rest."""
+        c = self.config
+        with self._lock:
+            Tf, Tt = np.asarray(T_from, float), np.asarray(T_to, float)
+            To = np.asarray(T_base_object, float)
+            sweep = self._sweep
+            if sweep is not None and np.allclose(sweep[1], Tf, atol=1e-6) and np.allclose(sweep[2], To, atol=1e-6):
+                d = sweep[0]
+            else:
+                d = self._start(rng)
+                self._set_object(d, To)
+                self._set_hand(d, Tf, teleport=True)
+                self._set_pads(d, opening)
+                mujoco.mj_forward(self.model, d)
+            seconds = max(float(np.linalg.norm(Tt[:3, 3] - Tf[:3, 3])) / max(c.push_speed, 1e-6), c.timestep)
+
+            def along(s: float) -> np.ndarray:
+                T = Tt.copy()
+                T[:3, 3] = Tf[:3, 3] + s * (Tt[:3, 3] - Tf[:3, 3])
+                return T
+            self._run(d, seconds, hand=along)
+            T_end = self._object_pose(d)
+            v = d.qvel[self._obj_dof:self._obj_dof + 6]
+            moving = bool(self._pads_touching(d)) or np.linalg.norm(v[:3]) > 2e-3 or np.linalg.norm(v[3:]) > 2e-2
+            still = np.linalg.norm(T_end[:3, 3] - To[:3, 3]) < 1e-4 and _rotation_deg(invert(To) @ T_end) < 0.05
+            if not moving and still:
+                self._sweep = None  # untouched: it stays exactly where it was (no resting jitter)
+                return To.copy()
+            self._sweep = (d, Tt.copy(), T_end.copy()) if moving else None
+            return T_end
 
     def settle(self, T_base_object: np.ndarray, seconds: float = 1.0) -> np.ndarray:
         """Where an object put at ``T_base_object`` (e.g. hovering, or tilted) comes to rest on the table."""

@@ -33,7 +33,10 @@ from services.sim.render import RenderResult, RenderScene, SceneBox, TableSpec, 
 
 #: Where an object stands by default (docs/conventions.md).
 DEFAULT_OBJECT_XY = (0.50, 0.0)
-_STREAM_SESSION, _STREAM_FRAME, _STREAM_GRASP, _STREAM_PLACE, _STREAM_TURN = range(5)
+_STREAM_SESSION, _STREAM_FRAME, _STREAM_GRASP, _STREAM_PLACE, _STREAM_TURN, _STREAM_PUSH = range(6)
+#: m between the pads at most for a moving hand to push the object (mujoco mode): a closed hand. An open one
+#: passes as before (its approach is the geometric checker's), so grasps are not disturbed on the way in.
+PUSH_OPENING = 0.01
 _CONTACT_SAMPLES = 40000
 #: Version of ``World.snapshot``'s layout; ``from_snapshot`` refuses any other.
 SNAPSHOT_FORMAT = 1
@@ -131,7 +134,7 @@ class World:
             self.T_base_camera: np.ndarray | None = None
             self._force_slip = False
             self._pad_state: tuple[float, ...] | None = None
-            self.counts = {"frames": 0, "grasps": 0, "slips": 0, "set_downs": 0, "turns": 0}
+            self.counts = {"frames": 0, "grasps": 0, "slips": 0, "set_downs": 0, "turns": 0, "pushes": 0}
             self.last_set_down: dict = {}
             self.last_grasp: dict = {}
 
@@ -306,12 +309,21 @@ class World:
         return GraspOutcome(True, "ok", result.width, result.message)
 
     def move_gripper(self, T_base_gripper: np.ndarray) -> None:
-        """The TCP moved (true pose from the arm's FK); a held object follows it."""
+        """The TCP moved (true pose from the arm's FK); a held object follows it. In the mujoco mode a closed
+        hand (pads at most ``PUSH_OPENING`` apart) that sweeps through the object pushes it."""
         Tg = check_transform(T_base_gripper, "T_base_gripper")
         with self._lock:
+            before = self.T_base_gripper
             self.T_base_gripper = Tg
             if self.attached:
                 self.T_base_object = Tg @ self.T_gripper_object
+            elif (self._physics is not None and before is not None and self.gripper_opening <= PUSH_OPENING
+                  and self._physics.sweeps_near(self.T_base_object, before, Tg)):
+                rng = self._rng(_STREAM_PUSH, self.counts.get("pushes", 0))
+                T = self._physics.push(self.T_base_object, before, Tg, self.gripper_opening, rng)
+                if not np.array_equal(T, self.T_base_object):
+                    self.counts["pushes"] = self.counts.get("pushes", 0) + 1
+                    self.T_base_object = T
 
     def open_gripper(self, opening: float | None = None) -> dict:
         """Open the fingers (default fully). A held object is set down: upright on the table (bottom at

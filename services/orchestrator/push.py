@@ -1,0 +1,105 @@
+"""Turning an object the arm cannot pick by pushing it round: the poses of one push.
+
+Why: from the arm's base the wrist reaches an object at the working distance (0.6 m) only roughly
+radially: a frontal approach within about 50 degrees of the line from the base, and top-down only nearer
+than about 0.45 m. A box whose one graspable side (the other is wider than the gripper's 10.6 cm stroke)
+lies along that line offers its faces only to a side or top-down approach, so no pick, turn, reposition
+or lay-down reaches it. Turned some 45 degrees on the table, the same box is picked frontally.
+
+How: the closed hand stands low in front of the face that looks towards the base, at one end of it, and
+its pad tips drive that end round an arc about the footprint's centre (straight chords, the hand's
+orientation fixed). The box turns and slides ahead of the pads; in the MuJoCo twin a 90-degree arc turns
+a 9.9 x 14.3 cm box about 50 degrees and moves it 4-7 cm outwards (measured). Pushing low (the hand 4 cm
+above the table, at most half the object's height; lower, the wrist meets the table) turns a tall box
+without tipping it.
+What the push achieved is not assumed: the views restart from a fresh scan (``push_step.py``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from common.footprint import min_area_rectangle
+from services.grasp.config import GripperConfig
+
+#: Degrees the pad tips travel round the footprint's centre (the box turns about half of it).
+ARC_DEG = 90.0
+#: Degrees of one straight chord of the arc.
+CHORD_DEG = 7.5
+#: Fraction of the face's half length from its middle where the pads push (near its end: the longest lever).
+END_FRACTION = 0.85
+#: m the pad tips start short of the face (close: low frontal poses nearer the base run into joint limits).
+START_GAP = 0.012
+#: m the hand backs off along its approach after the arc, before rising.
+BACK_OFF = 0.05
+#: m above the table the hand pushes at: low, so a tall box turns, not tips (lower, the wrist meets the table).
+PUSH_HEIGHT = 0.04
+
+
+@dataclass(frozen=True)
+class PushPoses:
+    """One push, as gripper poses in ``base``: over the start (clear of the object's top), the start (low,
+    short of the face), the chords' ends round the arc, and the way back out (back off, then up)."""
+
+    name: str
+    above: np.ndarray
+    start: np.ndarray
+    arc: list[np.ndarray]
+    retreat: list[np.ndarray]
+    sense: int  # +1: the box is driven counter-clockwise seen from above, -1 clockwise
+    expected_center: np.ndarray  # where the footprint's centre is expected afterwards (scan poses aim there)
+
+
+def _hand(approach: np.ndarray, position: np.ndarray) -> np.ndarray:
+    """A gripper pose approaching horizontally along ``approach``, its z axis up."""
+    x = np.array([approach[0], approach[1], 0.0])
+    x /= np.linalg.norm(x)
+    z = np.array([0.0, 0.0, 1.0])
+    T = np.eye(4)
+    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, np.cross(z, x), z, position
+    return T
+
+
+def _rotate(v: np.ndarray, deg: float) -> np.ndarray:
+    a = np.radians(deg)
+    return np.array([np.cos(a) * v[0] - np.sin(a) * v[1], np.sin(a) * v[0] + np.cos(a) * v[1]])
+
+
+def push_sequences(xyz: np.ndarray, height: float, clearance: float, arc_deg: float = ARC_DEG,
+                   gripper: GripperConfig | None = None) -> list[PushPoses]:
+    """The pushes of the object whose view cloud is ``xyz`` (``base``, standing ``height`` tall): one at each
+    end of the face that looks towards the base, the end whose arc stays nearer the base first."""
+    pts = np.asarray(xyz, float)
+    centre, axes, sides = min_area_rectangle(pts[:, :2])
+    if len(pts) < 10 or not np.all(sides > 0):
+        return []
+    tip = 0.5 * (gripper or GripperConfig()).pad_length
+    radial = centre / max(float(np.linalg.norm(centre)), 1e-9)
+    # the face that looks towards the base: its outward normal is the most opposed to the radial direction
+    faces = [(s * axes[:, i], sides[i] / 2, axes[:, 1 - i], sides[1 - i] / 2) for i in (0, 1) for s in (1.0, -1.0)]
+    normal, depth, tangent, half = min(faces, key=lambda f: float(f[0] @ radial))
+    approach = -normal
+    z = min(PUSH_HEIGHT, 0.5 * height)
+    out: list[PushPoses] = []
+    for end in (1.0, -1.0):
+        lever = normal * depth + tangent * end * END_FRACTION * half  # contact point from the centre
+        # the sense of rotation that drives the contact point into the face
+        sense = 1 if float(np.cross([0, 0, 1.0], [*lever, 0.0])[:2] @ approach) > 0 else -1
+        steps = max(1, int(np.ceil(arc_deg / CHORD_DEG)))
+        contacts = [centre + _rotate(lever, sense * arc_deg * i / steps) for i in range(steps + 1)]
+        arc = [_hand(approach, [*(p - approach * tip), z]) for p in contacts]
+        start = _hand(approach, [*(contacts[0] - approach * (tip + START_GAP)), z])
+        above = start.copy()
+        above[2, 3] = height + clearance
+        back = arc[-1].copy()
+        back[:3, 3] -= back[:3, 0] * BACK_OFF
+        up = back.copy()
+        up[2, 3] = height + clearance
+        moved = 0.5 * (contacts[-1] - contacts[0])  # the box follows the pads about half way (measured)
+        out.append(PushPoses(name=f"push_{'left' if end > 0 else 'right'}_end", above=above, start=start, arc=arc,
+                             retreat=[back, up], sense=sense,
+                             expected_center=np.array([*(centre + moved), 0.0])))
+    out.sort(key=lambda p: float(np.linalg.norm(p.arc[-1][:2, 3])))
+    return out

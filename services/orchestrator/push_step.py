@@ -1,0 +1,126 @@
+"""The state machine's side of a push (geometry: ``push.py``): when to push, checking and running one, and
+restarting the views afterwards. Functions over an ``Acquisition`` (``machine.py``), which calls in at
+one point: the last strategy of a turn step.
+
+When: the view's re-scans are used up (the next failure ends the run), no grasp turned the object, no
+reposition, pitched turn or lay-down was executable, the object stands (a lying one is picked top-down),
+and fewer than ``AcquisitionConfig.max_pushes`` pushes were made. It replaces a certain stop, never a turn.
+
+How: the whole push is dry-run first (over the start, down, round the arc, back and up); then the hand
+closes above the start, runs it, and opens again above the object.
+
+After: what the push achieved is not assumed. The views so far are set aside (``view_KK_pushedN``, kept
+on disk, never fused with later ones) and the views restart at 0 where the object now stands, its
+expected centre the one the push aims at, with a fresh re-scan budget.
+"""
+
+from __future__ import annotations
+
+import shutil
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from common.api import ViewResult
+from common.errors import RemoteError
+from common.session_folder import view_dir
+from services.orchestrator.limits import ARM_UNAVAILABLE_CODES
+from services.orchestrator.motion import FULL_OPENING
+from services.orchestrator.push import PushPoses, push_sequences
+
+if TYPE_CHECKING:
+    from services.orchestrator.states import State
+
+#: The running acquisition (``machine.Acquisition``), typed loosely: that module imports this one.
+Acquisition = Any
+
+
+def wanted(acq: Acquisition, k: int, view: ViewResult) -> bool:
+    """Whether a push is the next strategy at view ``k`` (see the module's "When")."""
+    if len(acq.j.pushes) >= acq.config.max_pushes or acq._lying(view.cloud.xyz, view.height):
+        return False
+    return int(acq.j.rescans.get(str(k), 0)) >= acq.config.max_rescans
+
+
+def _moves(seq: PushPoses) -> list[tuple[np.ndarray, bool]]:
+    """The straight moves after the one over the start, each with whether it may touch the object."""
+    return [(seq.start, False), *((T, True) for T in seq.arc), *((T, True) for T in seq.retreat)]
+
+
+async def check_push(acq: Acquisition, seq: PushPoses) -> np.ndarray:
+    """Dry-run one push whole from the arm's current joints; its joints over the start, or raises."""
+    m = acq.config.turn
+    state = await acq.cell.state()
+    q = (await acq.cell.move("pose", target=seq.above, q=np.asarray(state.position, float), speed=m.speed_scale,
+                             dry_run=True)).q
+    q_above = np.asarray(q, float)
+    for T, contact in _moves(seq):
+        q = (await acq.cell.move("linear", target=T, q=q, speed=m.approach_speed_scale, contact=contact,
+                                 dry_run=True, check_opening=0.0)).q
+    return q_above
+
+
+async def try_push(acq: Acquisition, k: int, view: ViewResult, failures: list[str]) -> State | None:
+    """Turn the object of view ``k`` by a push if one is executable: the next state, or None when none was
+    (or a push is not the next strategy here)."""
+    if not wanted(acq, k, view):
+        return None
+    m = acq.config.turn
+    seqs = push_sequences(view.cloud.xyz, view.height, m.clearance)
+    acq.decide("pushing the object round: no pick reaches it", pushes=[s.name for s in seqs])
+    for seq in seqs:
+        acq.j.counters.grasp_checks += 1
+        try:
+            q_above = await check_push(acq, seq)
+        except RemoteError as exc:
+            if exc.code in ARM_UNAVAILABLE_CODES:
+                raise
+            failures.append(f"{seq.name}:{exc.code}")
+            acq._limits(k).setdefault("dry_run", []).append(exc.code)
+            acq.decide("push not executable", push=seq.name, code=exc.code, message=exc.message[:200])
+            continue
+        await _execute(acq, seq, q_above)
+        return _restart_views(acq, k, seq, view)
+    acq.decide("no push executable", checks=len(seqs))
+    return None
+
+
+async def _execute(acq: Acquisition, seq: PushPoses, q_above: np.ndarray) -> None:
+    """Run a checked push: closed over the start, down, round the arc, back, up, open."""
+    m, c = acq.config.turn, acq.cell
+    await acq.motion.escape(np.asarray(seq.expected_center, float), float(seq.above[2, 3] - m.clearance))
+    await acq.motion.transit_joints(q_above, m.speed_scale)
+    await c.gripper(0.0, m.gripper_force)
+    await c.clear_object_box()  # the hand goes where the object stands: that is the point of a push
+    for T, contact in _moves(seq):
+        await c.move("linear", target=T, speed=m.approach_speed_scale, contact=contact)
+    await c.gripper(FULL_OPENING, m.gripper_force)
+
+
+def _restart_views(acq: Acquisition, k: int, seq: PushPoses, view: ViewResult) -> State:
+    """The object was pushed at view ``k``: views 0..k set aside, the views restart at 0 where it is expected."""
+    from services.orchestrator.states import State
+
+    j = acq.j
+    n = len(j.pushes) + 1
+    for v in range(k + 1):
+        src = view_dir(acq.store.path, v)
+        dst = src.with_name(f"{src.name}_pushed{n}")
+        if src.exists() and not dst.exists():
+            shutil.move(str(src), str(dst))
+    for table in (j.regrasps, j.limits, j.failed_grasps):  # evidence of the pose before the push, kept apart
+        for v in range(k + 1):
+            if str(v) in table:
+                table[f"{v}_pushed{n}"] = table.pop(str(v))
+    center = [float(x) for x in seq.expected_center]
+    j.update(view=0, turns_deg=[0.0], scan_sets={}, rescans={}, grasp_mode="auto", centers={"-1": center},
+             heights={"-1": float(view.height)}, turn_direction=None, turn_intent=None, holding=False,
+             pending_rescan=None)
+    j.pushes.append({"push": seq.name, "from_view": k, "sense": seq.sense,
+                     "from_center": np.asarray(view.center, float).tolist(), "expected_center": center})
+    j.counters.pushes += 1
+    acq._plan = None
+    acq.decide("pushed round: the views restart where it now stands (the earlier views are kept aside)",
+               push=seq.name, from_view=k, expected_center=center)
+    acq.store.save_journal(j.to_dict())
+    return State.SCAN

@@ -1,0 +1,55 @@
+"""The poses of a push (``services/orchestrator/push.py``): the closed hand starts low in front of the face that
+looks towards the base, at one end of it, and drives that end round the footprint's centre."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.orchestrator.push import PUSH_HEIGHT, push_sequences
+from tests.grasp import shapes as S
+
+
+def _box(size: tuple[float, float, float], xy: tuple[float, float], yaw_deg: float) -> np.ndarray:
+    center = np.array([*xy, 0.0])
+    cams = [center + 0.38 * np.array([-np.cos(np.radians(a)), np.sin(np.radians(a)), 0.0]) + [0, 0, 0.3]
+            for a in (-22.0, 0.0, 22.0)]
+    xyz, _ = S.box(size, 12000, xy=np.asarray(xy), yaw_deg=yaw_deg, view_from=cams, noise=0.0005)
+    return xyz
+
+
+@pytest.mark.parametrize(("xy", "yaw"), [((0.60, 0.0), 0.0), ((0.55, -0.15), 10.0), ((0.58, 0.12), -80.0)])
+def test_a_push_starts_before_the_face_towards_the_base_and_drives_one_end_round(xy, yaw):
+    size = (0.099, 0.143, 0.109)
+    seqs = push_sequences(_box(size, xy, yaw), size[2], 0.08)
+    assert len(seqs) == 2 and {s.sense for s in seqs} == {1, -1}  # one at each end, turning opposite ways
+    centre = np.array(xy)
+    radial = centre / np.linalg.norm(centre)
+    for s in seqs:
+        approach = s.start[:3, 0]
+        assert approach[2] == pytest.approx(0.0) and s.start[:3, 2] @ [0, 0, 1.0] == pytest.approx(1.0)
+        # towards the box, within the half-angle a face of the footprint allows
+        assert approach[:2] @ radial > np.cos(np.radians(46.0))
+        # the pads start short of the object, at the push height, and the hand comes down from above its top
+        assert (s.start[:2, 3] - centre) @ approach[:2] < -0.049 - 0.02 - 0.01
+        assert s.start[2, 3] == pytest.approx(PUSH_HEIGHT)
+        assert s.above[2, 3] == pytest.approx(size[2] + 0.08)
+        assert all(T[2, 3] == pytest.approx(PUSH_HEIGHT) for T in s.arc)
+        # round the centre (the one the seen faces give, within 2 mm of the true one): every chord end as far
+        # from it, the hand's orientation unchanged
+        tips = [T[:2, 3] + 0.02 * approach[:2] - centre for T in s.arc]
+        radii = [float(np.linalg.norm(t)) for t in tips]
+        assert np.ptp(radii) < 0.002
+        assert all(np.allclose(T[:3, :3], s.start[:3, :3]) for T in s.arc)
+        # the first chord drives the contact into the face (along the approach), turning the box s.sense
+        assert (tips[1] - tips[0]) @ approach[:2] > 0
+        assert np.sign(tips[0][0] * tips[1][1] - tips[0][1] * tips[1][0]) == s.sense
+        # out again: back along the approach, then up over the object
+        assert s.retreat[-1][2, 3] == pytest.approx(size[2] + 0.08)
+
+
+def test_a_push_keeps_low_on_a_short_object_and_none_is_planned_on_too_few_points():
+    size = (0.099, 0.143, 0.03)
+    seqs = push_sequences(_box(size, (0.6, 0.0), 0.0), size[2], 0.08)
+    assert all(T[2, 3] <= 0.5 * size[2] + 1e-9 for s in seqs for T in s.arc)
+    assert push_sequences(np.zeros((5, 3)), 0.1, 0.08) == []
