@@ -53,3 +53,34 @@ def test_a_push_keeps_low_on_a_short_object_and_none_is_planned_on_too_few_point
     seqs = push_sequences(_box(size, (0.6, 0.0), 0.0), size[2], 0.08)
     assert all(T[2, 3] <= 0.5 * size[2] + 1e-9 for s in seqs for T in s.arc)
     assert push_sequences(np.zeros((5, 3)), 0.1, 0.08) == []
+
+
+def test_a_box_no_pick_reaches_is_pushed_round_and_the_views_restart_where_it_stands(tmp_path):
+    """The 9.9 x 14.3 x 10.9 cm box at 0.60 m, graspable only across its 9.9 cm along the line from the base,
+    at view 0's last chance (re-scans used up): the push is dry-run whole, run with the hand closed, and the
+    views restart at 0 around where the box is expected, the view before it kept aside."""
+    import asyncio
+
+    from services.arm.kinematics import Kinematics
+    from services.orchestrator.push_step import try_push
+    from services.orchestrator.states import State
+    from tests.orchestrator.test_lay_down import _standing_tall_box
+
+    size = (0.099, 0.143, 0.109)
+    cell, acq = _standing_tall_box(Kinematics(), tmp_path, rescans=2, size=size)
+    view = acq.store.load_view(0)
+    assert asyncio.run(try_push(acq, 0, view, [])) == State.SCAN
+    executed = [m for m in cell.log if not m["dry_run"]]
+    assert executed and all(m["error"] is None for m in executed)
+    assert sum(m["holding"] for m in executed) >= 12  # the hand closed for the way down, the arc and the way out
+    assert not cell.holding  # and open again afterwards
+    assert acq.j.counters.pushes == 1 and acq.j.pushes[0]["from_view"] == 0
+    assert acq.view == 0 and acq.j.rescans == {} and acq.j.turns_deg == [0.0]
+    assert (tmp_path / "view_00_pushed1").is_dir() and not acq.store.has_view(0)
+    expected = np.asarray(acq.j.centers["-1"])
+    assert 0.03 < expected[0] - 0.60 < 0.08  # the box goes outwards ahead of the pads
+    assert "pushed round x1" in acq._recoveries_tried(0)
+    # a second push is allowed, a third is not (``max_pushes``)
+    acq.j.pushes.append({"push": "push_left_end", "from_view": 0})
+    acq.j.rescans = {"0": 2}
+    assert asyncio.run(try_push(acq, 0, view, [])) is None
