@@ -705,7 +705,7 @@ class Acquisition:
             laid = await try_lay_down(self, k, view, (box_c, box_e), failures)  # too tall to turn standing
             if laid is not None:
                 return laid
-            pushed = await try_push(self, k, view, failures)  # no pick reaches it: turn it on the table
+            pushed = await try_push(self, k, view, (box_c, box_e), failures)  # no pick reaches it: turn it on the table
             if pushed is not None:
                 return pushed
         self._plan = None

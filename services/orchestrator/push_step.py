@@ -48,7 +48,9 @@ def _moves(seq: PushPoses) -> list[tuple[np.ndarray, bool]]:
 
 
 async def check_push(acq: Acquisition, seq: PushPoses) -> np.ndarray:
-    """Dry-run one push whole from the arm's current joints; its joints over the start, or raises."""
+    """Dry-run one push whole from the arm's current joints; its joints over the start, or raises. The object's
+    box is not among the obstacles (the caller clears it): the fingers go where the object stands, which is
+    the point of a push, and it moves ahead of them; the table and the arm's envelope are checked."""
     m = acq.config.turn
     state = await acq.cell.state()
     q = (await acq.cell.move("pose", target=seq.above, q=np.asarray(state.position, float), speed=m.speed_scale,
@@ -60,14 +62,17 @@ async def check_push(acq: Acquisition, seq: PushPoses) -> np.ndarray:
     return q_above
 
 
-async def try_push(acq: Acquisition, k: int, view: ViewResult, failures: list[str]) -> State | None:
+async def try_push(acq: Acquisition, k: int, view: ViewResult, box: tuple[np.ndarray, np.ndarray],
+                   failures: list[str]) -> State | None:
     """Turn the object of view ``k`` by a push if one is executable: the next state, or None when none was
-    (or a push is not the next strategy here)."""
+    (or a push is not the next strategy here). ``box``: the object's box, set again when no push ran."""
     if not wanted(acq, k, view):
         return None
     m = acq.config.turn
     seqs = push_sequences(view.cloud.xyz, view.height, m.clearance)
     acq.decide("pushing the object round: no pick reaches it", pushes=[s.name for s in seqs])
+    await acq.motion.escape(view.center, view.height)
+    await acq.cell.clear_object_box()
     for seq in seqs:
         acq.j.counters.grasp_checks += 1
         try:
@@ -82,16 +87,15 @@ async def try_push(acq: Acquisition, k: int, view: ViewResult, failures: list[st
         await _execute(acq, seq, q_above)
         return _restart_views(acq, k, seq, view)
     acq.decide("no push executable", checks=len(seqs))
+    await acq.cell.set_object_box(*box)
     return None
 
 
 async def _execute(acq: Acquisition, seq: PushPoses, q_above: np.ndarray) -> None:
     """Run a checked push: closed over the start, down, round the arc, back, up, open."""
     m, c = acq.config.turn, acq.cell
-    await acq.motion.escape(np.asarray(seq.expected_center, float), float(seq.above[2, 3] - m.clearance))
     await acq.motion.transit_joints(q_above, m.speed_scale)
     await c.gripper(0.0, m.gripper_force)
-    await c.clear_object_box()  # the hand goes where the object stands: that is the point of a push
     for T, contact in _moves(seq):
         await c.move("linear", target=T, speed=m.approach_speed_scale, contact=contact)
     await c.gripper(FULL_OPENING, m.gripper_force)

@@ -62,6 +62,7 @@ def test_a_box_no_pick_reaches_is_pushed_round_and_the_views_restart_where_it_st
     import asyncio
 
     from services.arm.kinematics import Kinematics
+    from services.orchestrator.planning import object_box
     from services.orchestrator.push_step import try_push
     from services.orchestrator.states import State
     from tests.orchestrator.test_lay_down import _standing_tall_box
@@ -69,7 +70,9 @@ def test_a_box_no_pick_reaches_is_pushed_round_and_the_views_restart_where_it_st
     size = (0.099, 0.143, 0.109)
     cell, acq = _standing_tall_box(Kinematics(), tmp_path, rescans=2, size=size)
     view = acq.store.load_view(0)
-    assert asyncio.run(try_push(acq, 0, view, [])) == State.SCAN
+    box = object_box(view.center, view.height, view.cloud.xyz, acq.config.turn.object_box_margin)
+    asyncio.run(cell.set_object_box(*box))  # as the turn step leaves it: the fingers must be let into it
+    assert asyncio.run(try_push(acq, 0, view, box, [])) == State.SCAN
     executed = [m for m in cell.log if not m["dry_run"]]
     assert executed and all(m["error"] is None for m in executed)
     assert sum(m["holding"] for m in executed) >= 12  # the hand closed for the way down, the arc and the way out
@@ -83,4 +86,4 @@ def test_a_box_no_pick_reaches_is_pushed_round_and_the_views_restart_where_it_st
     # a second push is allowed, a third is not (``max_pushes``)
     acq.j.pushes.append({"push": "push_left_end", "from_view": 0})
     acq.j.rescans = {"0": 2}
-    assert asyncio.run(try_push(acq, 0, view, [])) is None
+    assert asyncio.run(try_push(acq, 0, view, box, [])) is None
