@@ -34,6 +34,8 @@ END_FRACTION = 0.85
 START_GAP = 0.012
 #: m the hand backs off along its approach after the arc, before rising.
 BACK_OFF = 0.05
+#: A face looks towards the base when its outward normal is this far (cosine) against the line from the base.
+FACING_COS = 0.35
 #: m above the table the hand pushes at: low, so a tall box turns, not tips (lower, the wrist meets the table).
 PUSH_HEIGHT = 0.04
 
@@ -68,38 +70,49 @@ def _rotate(v: np.ndarray, deg: float) -> np.ndarray:
 
 
 def push_sequences(xyz: np.ndarray, height: float, clearance: float, arc_deg: float = ARC_DEG,
-                   gripper: GripperConfig | None = None) -> list[PushPoses]:
+                   gripper: GripperConfig | None = None, sense: int | None = None) -> list[PushPoses]:
     """The pushes of the object whose view cloud is ``xyz`` (``base``, standing ``height`` tall): one at each
-    end of the face that looks towards the base, the end whose arc stays nearer the base first."""
+    end of each face that looks towards the base (one face when the box stands square to the line from the
+    base, two when it stands turned). Those turning it the way ``sense`` says first (a second push goes on
+    turning it the way the first did), then the ones whose arc stays nearer the base."""
     pts = np.asarray(xyz, float)
-    centre, axes, sides = min_area_rectangle(pts[:, :2])
-    if len(pts) < 10 or not np.all(sides > 0):
+    if len(pts) < 10:
         return []
-    tip = 0.5 * (gripper or GripperConfig()).pad_length
-    radial = centre / max(float(np.linalg.norm(centre)), 1e-9)
-    # the face that looks towards the base: its outward normal is the most opposed to the radial direction
-    faces = [(s * axes[:, i], sides[i] / 2, axes[:, 1 - i], sides[1 - i] / 2) for i in (0, 1) for s in (1.0, -1.0)]
-    normal, depth, tangent, half = min(faces, key=lambda f: float(f[0] @ radial))
-    approach = -normal
+    centre, axes, sides = min_area_rectangle(pts[:, :2])
+    if not np.all(sides > 0):
+        return []
+    g = gripper or GripperConfig()
+    tip = 0.5 * g.pad_length
+    # the hand approaches along the line from the base (where the wrist reaches farthest), not square to a face
+    # turned away from it
+    approach = centre / max(float(np.linalg.norm(centre)), 1e-9)
     z = min(PUSH_HEIGHT, 0.5 * height)
+    faces = [(s * axes[:, i], sides[i] / 2, axes[:, 1 - i], sides[1 - i] / 2) for i in (0, 1) for s in (1.0, -1.0)]
+    facing = sorted((f for f in faces if float(f[0] @ approach) < -FACING_COS), key=lambda f: float(f[0] @ approach))
     out: list[PushPoses] = []
-    for end in (1.0, -1.0):
-        lever = normal * depth + tangent * end * END_FRACTION * half  # contact point from the centre
-        # the sense of rotation that drives the contact point into the face
-        sense = 1 if float(np.cross([0, 0, 1.0], [*lever, 0.0])[:2] @ approach) > 0 else -1
-        steps = max(1, int(np.ceil(arc_deg / CHORD_DEG)))
-        contacts = [centre + _rotate(lever, sense * arc_deg * i / steps) for i in range(steps + 1)]
-        arc = [_hand(approach, [*(p - approach * tip), z]) for p in contacts]
-        start = _hand(approach, [*(contacts[0] - approach * (tip + START_GAP)), z])
-        above = start.copy()
-        above[2, 3] = height + clearance
-        back = arc[-1].copy()
-        back[:3, 3] -= back[:3, 0] * BACK_OFF
-        up = back.copy()
-        up[2, 3] = height + clearance
-        moved = 0.5 * (contacts[-1] - contacts[0])  # the box follows the pads about half way (measured)
-        out.append(PushPoses(name=f"push_{'left' if end > 0 else 'right'}_end", above=above, start=start, arc=arc,
-                             retreat=[back, up], sense=sense,
-                             expected_center=np.array([*(centre + moved), 0.0])))
-    out.sort(key=lambda p: float(np.linalg.norm(p.arc[-1][:2, 3])))
+    for fi, (normal, depth, tangent, half) in enumerate(facing):
+        # back along the approach until the pads' front edge (both pads side by side) is ``START_GAP`` out of the
+        # face's plane, which puts it outside the box: a face turned from square meets a side corner first
+        square = float(-normal @ approach)
+        lateral = abs(float(normal @ np.array([-approach[1], approach[0]])))
+        gap = (START_GAP + g.pad_thickness * lateral) / square
+        for end in (1.0, -1.0):
+            lever = normal * depth + tangent * end * END_FRACTION * half  # contact point from the centre
+            # the sense of rotation a push along the approach at that point gives
+            turn = 1 if float(lever[0] * approach[1] - lever[1] * approach[0]) > 0 else -1
+            steps = max(1, int(np.ceil(arc_deg / CHORD_DEG)))
+            contacts = [centre + _rotate(lever, turn * arc_deg * i / steps) for i in range(steps + 1)]
+            arc = [_hand(approach, [*(p - approach * tip), z]) for p in contacts]
+            start = _hand(approach, [*(contacts[0] - approach * (tip + gap)), z])
+            above = start.copy()
+            above[2, 3] = height + clearance
+            back = arc[-1].copy()
+            back[:3, 3] -= back[:3, 0] * BACK_OFF
+            up = back.copy()
+            up[2, 3] = height + clearance
+            moved = 0.5 * (contacts[-1] - contacts[0])  # the box follows the pads about half way (measured)
+            out.append(PushPoses(name=f"push_face{fi}_{'left' if end > 0 else 'right'}_end", above=above,
+                                 start=start, arc=arc, retreat=[back, up], sense=turn,
+                                 expected_center=np.array([*(centre + moved), 0.0])))
+    out.sort(key=lambda p: (sense is not None and p.sense != sense, float(np.linalg.norm(p.arc[-1][:2, 3]))))
     return out

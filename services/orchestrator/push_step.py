@@ -69,7 +69,8 @@ async def try_push(acq: Acquisition, k: int, view: ViewResult, box: tuple[np.nda
     if not wanted(acq, k, view):
         return None
     m = acq.config.turn
-    seqs = push_sequences(view.cloud.xyz, view.height, m.clearance)
+    seqs = push_sequences(view.cloud.xyz, view.height, m.clearance,
+                          sense=int(acq.j.pushes[-1]['sense']) if acq.j.pushes else None)
     acq.decide("pushing the object round: no pick reaches it", pushes=[s.name for s in seqs])
     await acq.motion.escape(view.center, view.height)
     await acq.cell.clear_object_box()

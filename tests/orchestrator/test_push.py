@@ -21,17 +21,24 @@ def _box(size: tuple[float, float, float], xy: tuple[float, float], yaw_deg: flo
 @pytest.mark.parametrize(("xy", "yaw"), [((0.60, 0.0), 0.0), ((0.55, -0.15), 10.0), ((0.58, 0.12), -80.0)])
 def test_a_push_starts_before_the_face_towards_the_base_and_drives_one_end_round(xy, yaw):
     size = (0.099, 0.143, 0.109)
-    seqs = push_sequences(_box(size, xy, yaw), size[2], 0.08)
-    assert len(seqs) == 2 and {s.sense for s in seqs} == {1, -1}  # one at each end, turning opposite ways
+    xyz = _box(size, xy, yaw)
+    seqs = push_sequences(xyz, size[2], 0.08)
+    # both ends of each face towards the base (two faces when the box stands turned), turning either way
+    assert len(seqs) in (2, 4) and {s.sense for s in seqs} == {1, -1}
     centre = np.array(xy)
     radial = centre / np.linalg.norm(centre)
     for s in seqs:
         approach = s.start[:3, 0]
         assert approach[2] == pytest.approx(0.0) and s.start[:3, 2] @ [0, 0, 1.0] == pytest.approx(1.0)
-        # towards the box, within the half-angle a face of the footprint allows
-        assert approach[:2] @ radial > np.cos(np.radians(46.0))
-        # the pads start short of the object, at the push height, and the hand comes down from above its top
-        assert (s.start[:2, 3] - centre) @ approach[:2] < -0.049 - 0.02 - 0.01
+        assert approach[:2] @ radial > np.cos(np.radians(2.0))  # along the line from the base
+        # the pads start clear of the object (their front corners outside its footprint), at the push height,
+        # and the hand comes down from above its top
+        a = np.radians(yaw)
+        rot = np.array([[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]])  # base -> box axes
+        for side in (-0.022, 0.0, 0.022):
+            corner = s.start[:2, 3] + 0.02 * approach[:2] + side * s.start[:2, 1]
+            local = rot @ (corner - centre)
+            assert np.any(np.abs(local) > np.array(size[:2]) / 2 + 0.002), (s.name, side)
         assert s.start[2, 3] == pytest.approx(PUSH_HEIGHT)
         assert s.above[2, 3] == pytest.approx(size[2] + 0.08)
         assert all(T[2, 3] == pytest.approx(PUSH_HEIGHT) for T in s.arc)
@@ -46,6 +53,8 @@ def test_a_push_starts_before_the_face_towards_the_base_and_drives_one_end_round
         assert np.sign(tips[0][0] * tips[1][1] - tips[0][1] * tips[1][0]) == s.sense
         # out again: back along the approach, then up over the object
         assert s.retreat[-1][2, 3] == pytest.approx(size[2] + 0.08)
+    for sense in (1, -1):  # a second push goes on turning it the way the first did
+        assert push_sequences(xyz, size[2], 0.08, sense=sense)[0].sense == sense
 
 
 def test_a_push_keeps_low_on_a_short_object_and_none_is_planned_on_too_few_points():
