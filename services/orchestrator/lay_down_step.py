@@ -17,13 +17,11 @@ ones), the views restart at 0 where the object lies with a fresh re-scan budget,
 
 from __future__ import annotations
 
-import shutil
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from common.api import ViewResult
-from common.session_folder import view_dir
 from services.grasp.pitch import pitched
 from services.orchestrator.lay_down import (
     LayDownPoses,
@@ -34,6 +32,7 @@ from services.orchestrator.lay_down import (
     stands_tall,
 )
 from services.orchestrator.planning import object_box
+from services.orchestrator.views_aside import set_views_aside
 
 if TYPE_CHECKING:
     from services.orchestrator.states import State
@@ -111,15 +110,7 @@ def record_laid_down(acq: Acquisition, k: int) -> None:
     lies (its expected centre and height from the plan), and say so in the journal."""
     j = acq.j
     entry = dict(j.laid_down or {})
-    for v in range(k + 1):
-        src = view_dir(acq.store.path, v)
-        dst = src.with_name(f"{src.name}_standing")
-        if src.exists() and not dst.exists():
-            shutil.move(str(src), str(dst))
-    for table in (j.regrasps, j.limits, j.failed_grasps):  # evidence of the standing pose, kept apart
-        for v in range(k + 1):
-            if str(v) in table:
-                table[f"{v}_standing"] = table.pop(str(v))
+    set_views_aside(acq.store.path, j, k, "standing")  # the standing pose's views and evidence, kept apart
     center = [float(x) for x in entry.get("center", j.centers.get(str(k), [0.0, 0.0, 0.0]))]
     height = float(entry.get("height", j.heights.get(str(k), 0.1)))
     j.update(view=0, turns_deg=[0.0], scan_sets={}, rescans={}, grasp_mode="auto", centers={"-1": center},

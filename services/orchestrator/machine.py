@@ -33,7 +33,6 @@ from __future__ import annotations
 import asyncio
 import errno
 import logging
-import shutil
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -45,7 +44,6 @@ from common.api import GraspPlanReply, ViewResult
 from common.errors import ObjscanError, RemoteError
 from common.log import event
 from common.messages import Grasp
-from common.session_folder import view_dir
 from services.orchestrator.cell import Cell
 from services.orchestrator.cell_setup import prepare_cell
 from services.orchestrator.config import AcquisitionConfig
@@ -82,6 +80,7 @@ from services.orchestrator.session_report import acquisition_report, model_laten
 from services.orchestrator.states import TERMINAL, TRANSITIONS, State
 from services.orchestrator.topple import topple_reason
 from services.orchestrator.turn_journal import TurnJournal, released_at
+from services.orchestrator.views_aside import set_views_aside
 from services.registration.api import with_turn_accuracy
 from services.session_store import SessionStore
 
@@ -402,10 +401,7 @@ class Acquisition:
                                     detail={"view": k, "restarts": n - 1, "limit": "stability"})
         self.j.topple_restarts = n
         self.j.counters.topple_restarts = n
-        for v in range(k + 1):
-            src = view_dir(self.store.path, v)
-            if src.exists():
-                shutil.move(str(src), str(src.with_name(f"{src.name}_toppled{n}")))
+        set_views_aside(self.store.path, self.j, k, f"toppled{n}", evidence=False)  # its evidence is dropped below
         self.j.view, self.j.turns_deg, self.j.scan_sets, self.j.rescans = 0, [0.0], {}, {}
         self.j.grasp_mode, self.j.failed_grasps, self.j.centers, self.j.heights = "auto", {}, {}, {}
         self.j.turn_direction = None

@@ -16,17 +16,16 @@ expected centre the one the push aims at, with a fresh re-scan budget.
 
 from __future__ import annotations
 
-import shutil
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from common.api import ViewResult
 from common.errors import RemoteError
-from common.session_folder import view_dir
 from services.orchestrator.limits import ARM_UNAVAILABLE_CODES
 from services.orchestrator.motion import FULL_OPENING
 from services.orchestrator.push import PushPoses, push_sequences
+from services.orchestrator.views_aside import set_views_aside
 
 if TYPE_CHECKING:
     from services.orchestrator.states import State
@@ -108,15 +107,7 @@ def _restart_views(acq: Acquisition, k: int, seq: PushPoses, view: ViewResult) -
 
     j = acq.j
     n = len(j.pushes) + 1
-    for v in range(k + 1):
-        src = view_dir(acq.store.path, v)
-        dst = src.with_name(f"{src.name}_pushed{n}")
-        if src.exists() and not dst.exists():
-            shutil.move(str(src), str(dst))
-    for table in (j.regrasps, j.limits, j.failed_grasps):  # evidence of the pose before the push, kept apart
-        for v in range(k + 1):
-            if str(v) in table:
-                table[f"{v}_pushed{n}"] = table.pop(str(v))
+    set_views_aside(acq.store.path, j, k, f"pushed{n}")
     center = [float(x) for x in seq.expected_center]
     j.update(view=0, turns_deg=[0.0], scan_sets={}, rescans={}, grasp_mode="auto", centers={"-1": center},
              heights={"-1": float(view.height)}, turn_direction=None, turn_intent=None, holding=False,
