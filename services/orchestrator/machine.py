@@ -54,7 +54,7 @@ from services.orchestrator.lay_down import LAY_DOWN
 from services.orchestrator.lay_down_step import record_laid_down, try_lay_down
 from services.orchestrator.library_insert import insert_session_model_async
 from services.orchestrator.limits import ARM_UNAVAILABLE_CODES, name_limit, name_scan_pose_limit
-from services.orchestrator.motion import ArmMotion, GraspFailed
+from services.orchestrator.motion import ArmMotion, GraspFailed, pick_opening
 from services.orchestrator.pitched_turn import QUARTER_TURN
 from services.orchestrator.pitched_turn_step import try_pitched_turn
 from services.orchestrator.planning import (
@@ -509,10 +509,12 @@ class Acquisition:
         order = grasp_order(grasps, self._lying(xyz, height), self._slipped_kinds(self.view), xyz, center, height,
                             [abs(o) > 50.0 for o in offsets])
         fixed = self.j.turn_direction
+        box = object_box(center, height, xyz, cfg.turn.object_box_margin)
         out = []
         for gi in order:
             grasp = self._plan.grasps[gi]
-            sequences = sorted(turn_sequences(grasp, cfg.turn, height),
+            opening = pick_opening(grasp.width, cfg.turn.open_margin, False)
+            sequences = sorted(turn_sequences(grasp, cfg.turn, height, box, opening),
                                key=lambda sq: (fixed is not None and sq.direction != fixed,
                                                abs(offsets[gi] + sq.direction * cfg.turn_deg)))
             out += [(gi, grasp, sq) for sq in sequences if fixed is None or sq.direction == fixed]

@@ -13,6 +13,10 @@ from common.geometry import look_at
 from common.messages import Grasp
 from services.orchestrator.config import ScanGeometry, TurnMotion
 
+#: m the open fingers' tips reach ahead of the TCP along the approach (the pads, 4 cm long, centred on it).
+FINGER_TIP = 0.02
+#: m the open fingers' tips stand out of the object's collision box at a pre-grasp that had to back off.
+PREGRASP_CLEARANCE = 0.01
 
 def camera_pose_looking_at(target: np.ndarray, distance: float, elevation_deg: float, azimuth_deg: float
                            ) -> np.ndarray:
@@ -96,7 +100,32 @@ def _lift(T: np.ndarray, dz: float) -> np.ndarray:
     return out
 
 
-def turn_sequences(grasp: Grasp, motion: TurnMotion, object_height: float) -> list[TurnPoses]:
+def clear_pregrasp(pre: np.ndarray, grasp: np.ndarray, box: tuple[np.ndarray, np.ndarray], opening: float,
+                   tip: float = FINGER_TIP, clearance: float = PREGRASP_CLEARANCE) -> np.ndarray:
+    """``pre`` moved back along the approach until the open fingers' tips are ``clearance`` out of the object's
+    collision ``box`` (centre, extent), when the fingers, ``opening`` apart, do not straddle it.
+
+    Why: the pre-grasp stands a finger length back from the grasp, which leaves the open fingers reaching
+    into an object nearly as wide as the stroke (9.9 cm of 10.6), or deep along the approach; the arm's
+    collision check then refuses the way down to the pre-grasp (fingers in the object's box, which has a
+    margin). From far enough back the fingers come in along the approach, where contact is allowed. A
+    pre-grasp whose fingers straddle the box is left as it is."""
+    c, e = np.asarray(box[0], float), np.asarray(box[1], float)
+    x, y = grasp[:3, 0], grasp[:3, 1]
+    half_across = 0.5 * float(np.abs(y) @ e)  # the box's half width across the closing axis
+    if abs(float((c - pre[:3, 3]) @ y)) + half_across <= 0.5 * opening:
+        return pre
+    corners = c + 0.5 * e * np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)])
+    near = float(np.min((corners - grasp[:3, 3]) @ x))  # the box's nearest extent along the approach
+    back = max(float((grasp[:3, 3] - pre[:3, 3]) @ x), tip + clearance - near)
+    out = pre.copy()
+    out[:3, 3] = grasp[:3, 3] - back * x
+    return out
+
+
+def turn_sequences(grasp: Grasp, motion: TurnMotion, object_height: float,
+                   box: tuple[np.ndarray, np.ndarray] | None = None, opening: float | None = None
+                   ) -> list[TurnPoses]:
     """For each angular offset of ``grasp`` (likeliest first), its full pick-turn-place waypoints; then the
     same with the turn mirrored (-30°), for when the arm cannot follow the planner's direction.
 
@@ -108,7 +137,9 @@ def turn_sequences(grasp: Grasp, motion: TurnMotion, object_height: float) -> li
     The turn poses come from the planner (turn about the table normal through the object's centre); the
     retreat backs off from the turned grasp as far as the pre-grasp was from the grasp. Without a motion
     planner, joint-space moves happen only high above the object (``above_*``: ``clearance`` over its
-    top); near the object the hand moves on straight lines.
+    top); near the object the hand moves on straight lines. With the object's collision ``box`` and the
+    gripper's ``opening`` for this grasp, a pre-grasp whose open fingers would reach into the box stands
+    back until they are clear of it (``clear_pregrasp``).
     """
     safe_z = object_height + motion.clearance
     poses = {name: p.matrix() for name, p in grasp.poses.items()}
@@ -121,6 +152,8 @@ def turn_sequences(grasp: Grasp, motion: TurnMotion, object_height: float) -> li
             if pre is None or turn is None:
                 continue
             g = poses[name]
+            if box is not None and opening is not None:
+                pre = clear_pregrasp(pre, g, box, opening)
             if direction < 0:  # the same turn about the same line, the other way round
                 turn = np.linalg.inv(turn @ np.linalg.inv(g)) @ g
             back = pre[:3, 3] - g[:3, 3]
