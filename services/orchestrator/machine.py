@@ -510,11 +510,12 @@ class Acquisition:
                             [abs(o) > 50.0 for o in offsets])
         fixed = self.j.turn_direction
         box = object_box(center, height, xyz, cfg.turn.object_box_margin)
+        footprint = np.asarray(xyz, float)[:, :2]
         out = []
         for gi in order:
             grasp = self._plan.grasps[gi]
-            opening = pick_opening(grasp.width, cfg.turn.open_margin, False)
-            sequences = sorted(turn_sequences(grasp, cfg.turn, height, box, opening),
+            clear = (box, footprint, pick_opening(grasp.width, cfg.turn.open_margin, False))
+            sequences = sorted(turn_sequences(grasp, cfg.turn, height, clear),
                                key=lambda sq: (fixed is not None and sq.direction != fixed,
                                                abs(offsets[gi] + sq.direction * cfg.turn_deg)))
             out += [(gi, grasp, sq) for sq in sequences if fixed is None or sq.direction == fixed]

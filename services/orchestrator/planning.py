@@ -100,21 +100,26 @@ def _lift(T: np.ndarray, dz: float) -> np.ndarray:
     return out
 
 
-def clear_pregrasp(pre: np.ndarray, grasp: np.ndarray, box: tuple[np.ndarray, np.ndarray], opening: float,
+def clear_pregrasp(pre: np.ndarray, grasp: np.ndarray, box: tuple[np.ndarray, np.ndarray],
+                   footprint: np.ndarray, margin: float, opening: float,
                    tip: float = FINGER_TIP, clearance: float = PREGRASP_CLEARANCE) -> np.ndarray:
     """``pre`` moved back along the approach until the open fingers' tips are ``clearance`` out of the object's
-    collision ``box`` (centre, extent), when the fingers, ``opening`` apart, do not straddle it.
+    collision ``box`` (centre, extent: axis-aligned, grown by ``margin``), when the object itself, grown by
+    ``margin``, is wider across the closing axis than the fingers are open (``opening``).
 
     Why: the pre-grasp stands a finger length back from the grasp, which leaves the open fingers reaching
-    into an object nearly as wide as the stroke (9.9 cm of 10.6), or deep along the approach; the arm's
-    collision check then refuses the way down to the pre-grasp (fingers in the object's box, which has a
-    margin). From far enough back the fingers come in along the approach, where contact is allowed. A
-    pre-grasp whose fingers straddle the box is left as it is."""
-    c, e = np.asarray(box[0], float), np.asarray(box[1], float)
-    x, y = grasp[:3, 0], grasp[:3, 1]
-    half_across = 0.5 * float(np.abs(y) @ e)  # the box's half width across the closing axis
-    if abs(float((c - pre[:3, 3]) @ y)) + half_across <= 0.5 * opening:
+    beside the object; for an object nearly as wide as the stroke (9.9 cm of 10.6) its collision box then
+    holds them, and the arm refuses the way down to the pre-grasp. From far enough back the fingers come in
+    along the approach, where contact is allowed. ``footprint``: the object's points on the table (x, y),
+    whose extent across the closing axis (0.5 % of them either side left out: strays) is its width there; an
+    object the fingers clear keeps its pre-grasp."""
+    y = np.asarray(grasp[:3, 1], float)[:2]
+    along = np.asarray(footprint, float) @ y
+    across = float(np.quantile(along, 0.995) - np.quantile(along, 0.005)) + 2.0 * margin
+    if across <= opening:
         return pre
+    c, e = np.asarray(box[0], float), np.asarray(box[1], float)
+    x = grasp[:3, 0]
     corners = c + 0.5 * e * np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)])
     near = float(np.min((corners - grasp[:3, 3]) @ x))  # the box's nearest extent along the approach
     back = max(float((grasp[:3, 3] - pre[:3, 3]) @ x), tip + clearance - near)
@@ -124,7 +129,7 @@ def clear_pregrasp(pre: np.ndarray, grasp: np.ndarray, box: tuple[np.ndarray, np
 
 
 def turn_sequences(grasp: Grasp, motion: TurnMotion, object_height: float,
-                   box: tuple[np.ndarray, np.ndarray] | None = None, opening: float | None = None
+                   clear: tuple[tuple[np.ndarray, np.ndarray], np.ndarray, float] | None = None
                    ) -> list[TurnPoses]:
     """For each angular offset of ``grasp`` (likeliest first), its full pick-turn-place waypoints; then the
     same with the turn mirrored (-30°), for when the arm cannot follow the planner's direction.
@@ -137,9 +142,10 @@ def turn_sequences(grasp: Grasp, motion: TurnMotion, object_height: float,
     The turn poses come from the planner (turn about the table normal through the object's centre); the
     retreat backs off from the turned grasp as far as the pre-grasp was from the grasp. Without a motion
     planner, joint-space moves happen only high above the object (``above_*``: ``clearance`` over its
-    top); near the object the hand moves on straight lines. With the object's collision ``box`` and the
-    gripper's ``opening`` for this grasp, a pre-grasp whose open fingers would reach into the box stands
-    back until they are clear of it (``clear_pregrasp``).
+    top); near the object the hand moves on straight lines. With ``clear`` (the object's collision box, its
+    points' (x, y), and the gripper's opening for this grasp), a pre-grasp whose open fingers the
+    object's box would hold stands back until they are clear of it (``clear_pregrasp``, the box's margin
+    ``motion.object_box_margin``).
     """
     safe_z = object_height + motion.clearance
     poses = {name: p.matrix() for name, p in grasp.poses.items()}
@@ -152,8 +158,8 @@ def turn_sequences(grasp: Grasp, motion: TurnMotion, object_height: float,
             if pre is None or turn is None:
                 continue
             g = poses[name]
-            if box is not None and opening is not None:
-                pre = clear_pregrasp(pre, g, box, opening)
+            if clear is not None:
+                pre = clear_pregrasp(pre, g, clear[0], clear[1], motion.object_box_margin, clear[2])
             if direction < 0:  # the same turn about the same line, the other way round
                 turn = np.linalg.inv(turn @ np.linalg.inv(g)) @ g
             back = pre[:3, 3] - g[:3, 3]

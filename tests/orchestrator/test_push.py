@@ -109,13 +109,23 @@ def test_a_pregrasp_stands_back_until_open_fingers_that_cannot_straddle_the_box_
     pre = grasp.copy()
     pre[0, 3] -= 0.086
     wide = (np.array([0.72, 0.0, 0.06]), np.array([0.163, 0.119, 0.12]))  # 14.3 deep, 9.9 across, +1 cm a side
-    moved = clear_pregrasp(pre, grasp, wide, 0.105)
+    rng = np.random.default_rng(0)
+    box_xy = np.array([0.72, 0.0]) + rng.uniform(-0.5, 0.5, (2000, 2)) * [0.143, 0.099]
+    moved = clear_pregrasp(pre, grasp, wide, box_xy, 0.01, 0.105)
     near_face = 0.72 - 0.163 / 2
     assert moved[0, 3] + FINGER_TIP == pytest.approx(near_face - PREGRASP_CLEARANCE)
     np.testing.assert_array_equal(moved[:3, :3], pre[:3, :3])
     assert moved[1:3, 3] == pytest.approx(pre[1:3, 3])
     narrow = (np.array([0.72, 0.0, 0.06]), np.array([0.163, 0.08, 0.12]))  # 6 cm across: straddled
-    np.testing.assert_array_equal(clear_pregrasp(pre, grasp, narrow, 0.105), pre)
+    slim_xy = np.array([0.72, 0.0]) + rng.uniform(-0.5, 0.5, (2000, 2)) * [0.143, 0.06]
+    np.testing.assert_array_equal(clear_pregrasp(pre, grasp, narrow, slim_xy, 0.01, 0.105), pre)
+    # a round object's axis-aligned box is wider than it along a diagonal; the object itself decides
+    turned = grasp.copy()
+    turned[:3, :3] = [[0.7071, -0.7071, 0], [0.7071, 0.7071, 0], [0, 0, 1]]
+    can = (np.array([0.72, 0.0, 0.06]), np.array([0.0965, 0.0965, 0.12]))  # 7.65 cm across
+    a = rng.uniform(0, 2 * np.pi, 2000)
+    can_xy = np.array([0.72, 0.0]) + 0.03825 * np.column_stack([np.cos(a), np.sin(a)])
+    np.testing.assert_array_equal(clear_pregrasp(pre, turned, can, can_xy, 0.01, 0.105), pre)
 
 
 def test_the_pushed_box_is_picked_where_it_now_stands(tmp_path):
