@@ -17,7 +17,6 @@ import numpy as np
 import pytest
 
 from common.errors import RemoteError
-from services.orchestrator import machine
 from services.orchestrator.config import AcquisitionConfig
 from services.orchestrator.machine import Acquisition, State
 from services.session_store import SessionStore
@@ -131,7 +130,7 @@ def test_a_kill_between_moving_the_view_aside_and_saving_the_journal(tmp_path, m
         real_move(src, dst)
         raise Killed
 
-    monkeypatch.setattr(machine.shutil, "move", move_then_die)
+    monkeypatch.setattr(shutil, "move", move_then_die)
     with pytest.raises(Killed):
         asyncio.run(acq._rescan(0, "registration failed"))
     monkeypatch.undo()
