@@ -32,7 +32,7 @@ from services.orchestrator.lay_down import (
     stands_tall,
 )
 from services.orchestrator.planning import object_box
-from services.orchestrator.views_aside import set_views_aside
+from services.orchestrator.views_aside import restart_views
 
 if TYPE_CHECKING:
     from services.orchestrator.states import State
@@ -110,11 +110,9 @@ def record_laid_down(acq: Acquisition, k: int) -> None:
     lies (its expected centre and height from the plan), and say so in the journal."""
     j = acq.j
     entry = dict(j.laid_down or {})
-    set_views_aside(acq.store.path, j, k, "standing")  # the standing pose's views and evidence, kept apart
     center = [float(x) for x in entry.get("center", j.centers.get(str(k), [0.0, 0.0, 0.0]))]
     height = float(entry.get("height", j.heights.get(str(k), 0.1)))
-    j.update(view=0, turns_deg=[0.0], scan_sets={}, rescans={}, grasp_mode="auto", centers={"-1": center},
-             heights={"-1": height}, turn_direction=None, turn_intent=None, holding=False, pending_rescan=None)
+    restart_views(acq.store.path, j, k, "standing", center, height)  # the standing pose's views, kept apart
     entry.update(state="done", from_view=k)
     j.laid_down = entry
     j.counters.lay_downs += 1

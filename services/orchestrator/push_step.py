@@ -25,7 +25,7 @@ from common.errors import RemoteError
 from services.orchestrator.limits import ARM_UNAVAILABLE_CODES
 from services.orchestrator.motion import FULL_OPENING
 from services.orchestrator.push import PushPoses, push_sequences
-from services.orchestrator.views_aside import set_views_aside
+from services.orchestrator.views_aside import restart_views
 
 if TYPE_CHECKING:
     from services.orchestrator.states import State
@@ -107,11 +107,8 @@ def _restart_views(acq: Acquisition, k: int, seq: PushPoses, view: ViewResult) -
 
     j = acq.j
     n = len(j.pushes) + 1
-    set_views_aside(acq.store.path, j, k, f"pushed{n}")
     center = [float(x) for x in seq.expected_center]
-    j.update(view=0, turns_deg=[0.0], scan_sets={}, rescans={}, grasp_mode="auto", centers={"-1": center},
-             heights={"-1": float(view.height)}, turn_direction=None, turn_intent=None, holding=False,
-             pending_rescan=None)
+    restart_views(acq.store.path, j, k, f"pushed{n}", center, view.height)
     j.pushes.append({"push": seq.name, "from_view": k, "sense": seq.sense,
                      "from_center": np.asarray(view.center, float).tolist(), "expected_center": center})
     j.counters.pushes += 1

@@ -26,3 +26,11 @@ def set_views_aside(session: Path, j: Journal, last_view: int, suffix: str, *, e
             for v in range(last_view + 1):
                 if str(v) in table:
                     table[f"{v}_{suffix}"] = table.pop(str(v))
+
+
+def restart_views(session: Path, j: Journal, last_view: int, suffix: str, center: list[float], height: float) -> None:
+    """Set views 0..``last_view`` and their evidence aside (``set_views_aside``) and restart the views at 0
+    around the object's expected ``center`` and ``height``, with a fresh re-scan budget and no turn made."""
+    set_views_aside(session, j, last_view, suffix)
+    j.update(view=0, turns_deg=[0.0], scan_sets={}, rescans={}, grasp_mode="auto", centers={"-1": list(center)},
+             heights={"-1": float(height)}, turn_direction=None, turn_intent=None, holding=False, pending_rescan=None)
