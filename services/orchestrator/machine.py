@@ -493,14 +493,16 @@ class Acquisition:
         view ``k`` of before lay otherwise)."""
         return [e for e in self.j.regrasps.get(str(k), []) if int(e.get("restart", 0)) == self.j.topple_restarts]
 
-    def _candidates(self, center: np.ndarray, height: float, xyz: np.ndarray) -> list[tuple[int, Grasp, TurnPoses]]:
+    def _candidates(self, center: np.ndarray, height: float, xyz: np.ndarray,
+                    box: tuple[np.ndarray, np.ndarray]) -> list[tuple[int, Grasp, TurnPoses]]:
         """Every (grasp, offset, direction) of the plan, likeliest first.
 
         Grasps in ``recovery.grasp_order``: the kind that slipped last, top-down first on a lying object,
         radial-ish grasps before side ones, the safest hold against the centre of mass, then the planner's
         rank. Within a grasp, once the session has turned one way it keeps turning that way (12 views cover
         360 degrees in order); before that, the direction that brings the hand back toward radial goes
-        first, then the planner's offset order.
+        first, then the planner's offset order. ``box``: the object's collision box, which a pre-grasp's open
+        fingers must clear (``planning.clear_pregrasp``).
         """
         assert self._plan is not None
         cfg = self.config
@@ -509,7 +511,6 @@ class Acquisition:
         order = grasp_order(grasps, self._lying(xyz, height), self._slipped_kinds(self.view), xyz, center, height,
                             [abs(o) > 50.0 for o in offsets])
         fixed = self.j.turn_direction
-        box = object_box(center, height, xyz, cfg.turn.object_box_margin)
         footprint = np.asarray(xyz, float)[:, :2]
         out = []
         for gi in order:
@@ -607,7 +608,7 @@ class Acquisition:
         failed_before = set(self.j.failed_grasps.get(str(k), []))
         await self.motion.escape(view.center, view.height)
         await self.cell.set_object_box(box_c, box_e)
-        direct = self._candidates(view.center, view.height, view.cloud.xyz)
+        direct = self._candidates(view.center, view.height, view.cloud.xyz, (box_c, box_e))
         chains = list(direct)
         moved = await self._reposition(k, view.center, view.height, chains, (box_c, box_e), failures, proactive=True)
         if moved is not None:
