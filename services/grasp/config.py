@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields
 
+from common.stroke import NEAR_STROKE_SIDE
 from services.grasp.errors import GraspConfigError
 
 
@@ -134,6 +135,11 @@ class GraspPlannerConfig:
     max_grasp_line_tilt_deg: float = 15.0
     """A grasp line steeper than this against the table plane cannot be held by a horizontal
     (frontal) or vertical (top-down) approach: rejected as ``grasp_line_not_horizontal``."""
+
+    near_stroke_side: float = NEAR_STROKE_SIDE
+    """m a side the fully open pads clear a grasp's width under which the grasp is near the stroke
+    (``common.stroke``): its grasp line is then levelled (``poses.level_contacts``). There the pads fit beside
+    the object only square to its faces. Other grasps keep the line through their two contacts."""
 
     max_contact_angle_deg: float = 20.0
     """Both contact normals must lie within this angle of the grasp line (``not_antipodal``). Not in

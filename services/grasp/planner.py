@@ -35,6 +35,7 @@ from services.grasp.collision import (
 from services.grasp.completion import complete_hidden_sides, horizontal_axes
 from services.grasp.config import GraspPlannerConfig
 from services.grasp.errors import GraspInputError
+from services.grasp.near_stroke import near_stroke_contacts
 from services.grasp.pitch import pitch_poses
 from services.grasp.poses import frontal_rotation, grasp_poses, top_down_rotation
 from services.grasp.ranking import RankedPair, rank_region_pair
@@ -266,7 +267,10 @@ def _plan_frontal(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, cf
                                             inp.n_observed):
         if slots.get((axis, source), 0) >= cfg.candidates_per_axis:
             continue
-        p1, p2 = inp.xyz[pair.i], inp.xyz[pair.j]
+        p1, p2 = near_stroke_contacts(inp.xyz, inp.normals, pair.i, pair.j, inp.up, cfg.gripper.max_opening,
+                                      cfg.near_stroke_side)
+        if _wider_than_stroke(p1, p2, cfg, rej, "frontal", axis, pair):
+            continue
         R, swapped = frontal_rotation(p1, p2, inp.up, np.asarray(cfg.approach_origin, float))
         p_plus, p_minus = (p2, p1) if swapped else (p1, p2)
         mid = 0.5 * (p1 + p2)
@@ -312,7 +316,10 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
     for pair, axis, source in _ranked_pairs(xyz, nrm, inp.up, crop_frame, cfg, "top_down", rej, n_observed):
         if slots.get((axis, source), 0) >= cfg.candidates_per_axis:
             continue
-        p1, p2 = xyz[pair.i], xyz[pair.j]
+        p1, p2 = near_stroke_contacts(xyz, nrm, pair.i, pair.j, inp.up, cfg.gripper.max_opening,
+                                      cfg.near_stroke_side)
+        if _wider_than_stroke(p1, p2, cfg, rej, "top_down", axis, pair):
+            continue
         R, swapped = top_down_rotation(p1, p2, inp.up, np.asarray(cfg.approach_origin, float))
         p_plus, p_minus = (p2, p1) if swapped else (p1, p2)
         # the fingertips stop above the table: lift the pads along the approach until their lowest
@@ -471,6 +478,19 @@ def _object_hits(boxes: dict[str, OrientedBox], xyz: np.ndarray, cfg: GraspPlann
         if n >= cfg.object_collision_min_points:
             return n, name
     return 0, None
+
+
+def _wider_than_stroke(p1: np.ndarray, p2: np.ndarray, cfg: GraspPlannerConfig, rej: Rejections, kind: str,
+                       axis: str, pair: RankedPair) -> bool:
+    """Whether contacts settled on their faces (``near_stroke_contacts``) lie farther apart than the stroke: two
+    points of the cloud a little inside a 10.9 cm box's faces passed the pair's width test at 10.6 cm, and the
+    pads met the box. Recorded as ``too_wide``."""
+    width = float(np.linalg.norm(p1 - p2))
+    if width <= cfg.gripper.max_opening:
+        return False
+    rej.add("too_wide", example={"kind": kind, "axis": axis, "rank": pair.rank, "contacts": [p1, p2],
+                                 "width": width, "why": "its faces lie farther apart than the gripper opens"})
+    return True
 
 
 def _open_pads_clear(R: np.ndarray, mid: np.ndarray, xyz: np.ndarray, cfg: GraspPlannerConfig) -> bool:
