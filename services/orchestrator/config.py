@@ -200,7 +200,7 @@ class AcquisitionConfig:
     topple_height_tol_m: float = 0.02
     topple_height_rel: float = 0.25
     max_topple_restarts: int = 1
-    max_pushes: int = 2  # an object no pick reaches turned on the table by a push, at most this often (push.py)
+    max_pushes: int = 6  # an object no pick reaches turned on the table by a push, at most this often (push.py)
     evaluate: bool = True  # compare with ground truth when the cell knows it (sim)
     # pair registrations during the acquisition (services/orchestrator/incremental.py); off: all at the end
     incremental: bool = True

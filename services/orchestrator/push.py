@@ -12,7 +12,8 @@ orientation fixed). The box turns and slides ahead of the pads; in the MuJoCo tw
 a 9.9 x 14.3 cm box about 50 degrees and moves it 4-7 cm outwards (measured). Pushing low (the hand 4 cm
 above the table, at most half the object's height; lower, the wrist meets the table) turns a tall box
 without tipping it.
-What the push achieved is not assumed: the views restart from a fresh scan (``push_step.py``).
+What the push achieved is not assumed: it is measured (``measured_turn_deg``) on a look at the object
+afterwards, or, where it cannot be, the views restart from a fresh scan (``push_step.py``).
 """
 
 from __future__ import annotations
@@ -38,6 +39,13 @@ BACK_OFF = 0.05
 FACING_COS = 0.35
 #: m above the table the hand pushes at: low, so a tall box turns, not tips (lower, the wrist meets the table).
 PUSH_HEIGHT = 0.04
+
+
+#: A footprint whose long side is under this many times its short side has no long side to measure a turn by.
+MIN_ASPECT = 1.15
+#: Degrees a push must have turned the box by, at least and at most, for the measure to be believed: less is a
+#: push that slid the box without turning it, more than the pads' whole arc is a look at the wrong object.
+MIN_MEASURED_DEG, MAX_MEASURED_DEG = 5.0, ARC_DEG + 15.0
 
 
 @dataclass(frozen=True)
@@ -116,3 +124,31 @@ def push_sequences(xyz: np.ndarray, height: float, clearance: float, arc_deg: fl
                                  expected_center=np.array([*(centre + moved), 0.0])))
     out.sort(key=lambda p: (sense is not None and p.sense != sense, float(np.linalg.norm(p.arc[-1][:2, 3]))))
     return out
+
+
+def long_side_deg(xy: np.ndarray) -> float | None:
+    """Direction (deg, mod 180, about the table normal) of the long side of a footprint's smallest rectangle;
+    None when the footprint is too near square (``MIN_ASPECT``) for its long side to say which way it lies."""
+    pts = np.asarray(xy, float)
+    if len(pts) < 10:
+        return None
+    _, axes, sides = min_area_rectangle(pts[:, :2])
+    i = int(np.argmax(sides))
+    if sides[1 - i] <= 0 or sides[i] < MIN_ASPECT * sides[1 - i]:
+        return None
+    return float(np.degrees(np.arctan2(axes[1, i], axes[0, i]))) % 180.0
+
+
+def measured_turn_deg(before_xy: np.ndarray, after_xy: np.ndarray, sense: int) -> float | None:
+    """The turn (deg, counter-clockwise seen from above positive) a push of ``sense`` gave an object whose
+    footprint's points were ``before_xy`` and are ``after_xy``, from its long side's direction; None when it
+    cannot be told (a near-square footprint, or a turn outside what a push gives).
+
+    Why a measure and not the arc: the box slides as it turns, so a 90-degree arc turned the 9.9 x 14.3 cm box
+    35 to 70 degrees in the twin. The long side is a direction mod 180, and a push turns the box less than
+    that one way: the sense picks the one answer."""
+    a, b = long_side_deg(before_xy), long_side_deg(after_xy)
+    if a is None or b is None:
+        return None
+    turn = (b - a) % 180.0 if sense > 0 else -((a - b) % 180.0)
+    return turn if MIN_MEASURED_DEG <= abs(turn) <= MAX_MEASURED_DEG else None

@@ -9,9 +9,14 @@ and fewer than ``AcquisitionConfig.max_pushes`` pushes were made. It replaces a 
 How: the whole push is dry-run first (over the start, down, round the arc, back and up); then the hand
 closes above the start, runs it, and opens again above the object.
 
-After: what the push achieved is not assumed. The views so far are set aside (``view_KK_pushedN``, kept
-on disk, never fused with later ones) and the views restart at 0 where the object now stands, its
-expected centre the one the push aims at, with a fresh re-scan budget.
+After: what the push achieved is not assumed. After view 0 the hand looks at the object from above and the
+turn is measured from its footprint's long side (``push.measured_turn_deg``). Measured, the push is a turn:
+view ``k`` is scanned again where the object now stands, its commanded turn grown by the measured one, and
+the views before it are kept (a tall box whose only grasp is tied to its yaw needs a push every time the
+wrist's reach runs out, two or three in twelve views). Where the turn cannot be told (a near-square
+footprint, a turn no push gives), or at view 0, the views so far are set aside (``view_KK_pushedN``, kept on
+disk, never fused with later ones) and the views restart at 0 where the object now stands, its expected
+centre the one the push aims at, with a fresh re-scan budget.
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ from common.api import ViewResult
 from common.errors import RemoteError
 from services.orchestrator.limits import ARM_UNAVAILABLE_CODES
 from services.orchestrator.motion import FULL_OPENING
-from services.orchestrator.push import PushPoses, push_sequences
+from services.orchestrator.push import PushPoses, measured_turn_deg, push_sequences
 from services.orchestrator.views_aside import restart_views
 
 if TYPE_CHECKING:
@@ -85,6 +90,13 @@ async def try_push(acq: Acquisition, k: int, view: ViewResult, box: tuple[np.nda
             acq.decide("push not executable", push=seq.name, code=exc.code, message=exc.message[:200])
             continue
         await _execute(acq, seq, q_above)
+        if k > 0:
+            look = await _look(acq, seq)
+            turned = None if look is None else measured_turn_deg(view.cloud.xyz[:, :2], look.cloud.xyz[:, :2],
+                                                                 seq.sense)
+            if turned is not None:
+                return _continue_views(acq, k, seq, view, look, turned)
+            acq.decide("the push's turn cannot be told from a look at the object", push=seq.name)
         return _restart_views(acq, k, seq, view)
     acq.decide("no push executable", checks=len(seqs))
     await acq.cell.set_object_box(*box)
@@ -99,6 +111,41 @@ async def _execute(acq: Acquisition, seq: PushPoses, q_above: np.ndarray) -> Non
     for T, contact in _moves(seq):
         await c.move("linear", target=T, speed=m.approach_speed_scale, contact=contact)
     await c.gripper(FULL_OPENING, m.gripper_force)
+
+
+async def _look(acq: Acquisition, seq: PushPoses) -> ViewResult | None:
+    """A look at the pushed object from above where the push aims it (``Acquisition.look_at``), or None when the
+    arm cannot look there or the look finds no object."""
+    try:
+        return await acq.look_at(np.asarray(seq.expected_center, float),
+                                 acq.store.path / "pushes" / f"push{len(acq.j.pushes) + 1}")
+    except RemoteError as exc:
+        if exc.code in ARM_UNAVAILABLE_CODES:
+            raise
+        acq.decide("no look at the pushed object", code=exc.code, message=exc.message[:200])
+        return None
+
+
+def _continue_views(acq: Acquisition, k: int, seq: PushPoses, view: ViewResult, look: ViewResult,
+                    turned: float) -> State:
+    """The object was pushed at view ``k`` and turned ``turned`` degrees: view ``k`` is scanned again where the
+    look found it, its commanded turn grown by the turn (``TurnJournal.record_reposition``)."""
+    from services.orchestrator.states import State
+
+    j = acq.j
+    n = len(j.pushes) + 1
+    shift = np.array([*(np.asarray(look.center, float)[:2] - np.asarray(view.center, float)[:2]), 0.0])
+    j.pushes.append({"push": seq.name, "from_view": k, "sense": seq.sense, "turn_deg": round(float(turned), 2),
+                     "from_center": np.asarray(view.center, float).tolist(),
+                     "expected_center": [float(x) for x in seq.expected_center],
+                     "center": np.asarray(look.center, float).tolist()})
+    j.counters.pushes += 1
+    j.rescans[str(k)] = 0  # a new situation: the view's re-scan budget starts again (pushes are bounded)
+    acq._plan = None
+    acq.decide("pushed round: the turn measured, view scanned again where the object now stands", push=seq.name,
+               view=k, turn_deg=round(float(turned), 1))
+    acq.turns.record_reposition(k, shift, turn_deg=float(turned), strategy="push", aside=f"pushed{n}")
+    return State.SCAN
 
 
 def _restart_views(acq: Acquisition, k: int, seq: PushPoses, view: ViewResult) -> State:

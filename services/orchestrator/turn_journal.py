@@ -85,19 +85,21 @@ class TurnJournal:
         j.holding = False
         self._save()
 
-    def record_reposition(self, k: int, shift: np.ndarray | None, turn_deg: float = 0.0) -> None:
+    def record_reposition(self, k: int, shift: np.ndarray | None, turn_deg: float = 0.0,
+                          strategy: str | None = None, aside: str | None = None) -> None:
         """The object was set down at another spot: view ``k`` is scanned again where the object now stands
         (its old frames are moved aside, never deleted). Unturned, it keeps its commanded turn. Turned by
-        ``turn_deg`` (a quarter turn), view ``k``'s commanded turn grows by it when views before it are kept
-        (the registration's turn prior is the turn made); at view 0 nothing is kept yet, and the view scanned
-        again is where the object's frame (turn 0) starts."""
+        ``turn_deg`` (a quarter turn, or a push's measured turn: ``strategy`` "push", its frames set aside as
+        ``aside``), view ``k``'s commanded turn grows by it when views before it are kept (the registration's
+        turn prior is the turn made); at view 0 nothing is kept yet, and the view scanned again is where the
+        object's frame (turn 0) starts."""
         j = self.j
         d = np.zeros(3) if shift is None else np.asarray(shift, float)
         if str(k) in j.centers:
             j.centers[str(k)] = (np.asarray(j.centers[str(k)], float) + d).tolist()
             if k == 0:  # view 0's scan poses are placed around the located object: it now stands here
                 j.centers["-1"] = list(j.centers["0"])
-        strategy = "quarter turn" if turn_deg else "reposition"
+        strategy = strategy or ("quarter turn" if turn_deg else "reposition")
         n = 1 + sum(1 for e in j.regrasps.get(str(k), []) if e.get("strategy") == strategy)  # folder name
         if turn_deg and k > 0:
             j.turns_deg[k] = float(j.turns_deg[k]) + float(turn_deg)
@@ -105,14 +107,15 @@ class TurnJournal:
             {"strategy": strategy, "restart": j.topple_restarts, "shift": np.round(d, 4).tolist(),
              "to": np.round(np.asarray(j.centers.get(str(k), d), float)[:2], 4).tolist(),
              **({"turn_deg": float(turn_deg), "commanded_turn_deg": float(j.turns_deg[k])} if turn_deg else {})})
-        if turn_deg:
+        if strategy == "quarter turn":
             j.counters.regrasps += 1
-        else:
+        elif strategy == "reposition":
             j.counters.repositions += 1
         j.grasp_mode = "auto"
         j.turn_intent = None
         j.holding = False
-        j.pending_rescan = {"view": k, "attempt": n, "aside": f"{'quarter' if turn_deg else 'moved'}{n}"}
+        aside = aside or f"{'quarter' if turn_deg else 'moved'}{n}"
+        j.pending_rescan = {"view": k, "attempt": n, "aside": aside}
         self._save()
         self.finish_rescan()
         j.state = State.SCAN.value

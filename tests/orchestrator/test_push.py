@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from services.orchestrator.push import PUSH_HEIGHT, push_sequences
+from services.orchestrator.push import PUSH_HEIGHT, long_side_deg, measured_turn_deg, push_sequences
 from tests.grasp import shapes as S
 
 
@@ -92,8 +92,8 @@ def test_a_box_no_pick_reaches_is_pushed_round_and_the_views_restart_where_it_st
     expected = np.asarray(acq.j.centers["-1"])
     assert 0.03 < expected[0] - 0.60 < 0.08  # the box goes outwards ahead of the pads
     assert "pushed round x1" in acq._recoveries_tried(0)
-    # a second push is allowed, a third is not (``max_pushes``)
-    acq.j.pushes.append({"push": "push_left_end", "from_view": 0})
+    # more pushes are allowed up to ``max_pushes``, then none
+    acq.j.pushes += [{"push": "push_left_end", "from_view": 0}] * (acq.config.max_pushes - 1)
     acq.j.rescans = {"0": 2}
     assert asyncio.run(try_push(acq, 0, view, box, [])) is None
 
@@ -156,3 +156,95 @@ def test_the_pushed_box_is_picked_where_it_now_stands(tmp_path):
     assert any(m["holding"] for m in cell.log if not m["dry_run"])
     assert not [d for d in acq.j.decisions if d["what"] == "grasp pose not executable"
                 and "hits object" in str(d.get("message"))]
+
+
+@pytest.mark.parametrize(("before", "after", "sense", "turn"), [(0.0, 50.0, 1, 50.0), (80.0, 130.0, 1, 50.0),
+                                                                 (170.0, 35.0, 1, 45.0), (10.0, -35.0, -1, -45.0),
+                                                                 (-80.0, 50.0, -1, -50.0)])
+def test_a_push_s_turn_is_measured_from_the_footprint_s_long_side_as_partial_views_see_it(before, after, sense, turn):
+    size = (0.099, 0.143, 0.109)
+    a = _box(size, (0.60, 0.0), before)
+    b = _box(size, (0.66, 0.03), after)
+    assert measured_turn_deg(a[:, :2], b[:, :2], sense) == pytest.approx(turn, abs=1.5)
+
+
+def test_a_push_s_turn_is_not_told_from_a_near_square_footprint_or_beyond_what_a_push_gives():
+    square = _box((0.10, 0.108, 0.109), (0.60, 0.0), 0.0)
+    box = _box((0.099, 0.143, 0.109), (0.60, 0.0), 0.0)
+    assert long_side_deg(square[:, :2]) is None
+    assert measured_turn_deg(square[:, :2], _box((0.10, 0.108, 0.109), (0.66, 0.0), 40.0)[:, :2], 1) is None
+    assert measured_turn_deg(box[:, :2], _box((0.099, 0.143, 0.109), (0.62, 0.0), 2.0)[:, :2], 1) is None  # slid
+    assert measured_turn_deg(box[:, :2], _box((0.099, 0.143, 0.109), (0.62, 0.0), 40.0)[:, :2], -1) is None
+
+
+def _pushed_at_view_2(tmp_path, look_yaw_deg: float | None, look_size=(0.099, 0.143, 0.109)):  # noqa: ANN202
+    """The 9.9 x 14.3 x 10.9 cm box at view 2 of 12 (views 0-2 taken, re-scans used up), pushed; the look after
+    the push finds it at ``look_yaw_deg`` (None: the look fails). Returns (acquisition, cell, next state)."""
+    import asyncio
+
+    from common.errors import RemoteError
+    from services.arm.kinematics import Kinematics
+    from services.orchestrator.planning import object_box
+    from services.orchestrator.push_step import try_push
+    from tests.orchestrator.test_lay_down import WORKSPACE, _standing_tall_box, _view
+
+    size = (0.099, 0.143, 0.109)
+    cell, acq = _standing_tall_box(Kinematics(), tmp_path, rescans=2, size=size)
+    for k in (1, 2):
+        acq.store.save_view(_view(size, WORKSPACE, k))
+    acq.j.update(view=2, turns_deg=[0.0, 30.0, 60.0], turn_direction=1, rescans={"2": 2},
+                 centers={**acq.j.centers, "1": WORKSPACE.tolist(), "2": WORKSPACE.tolist()},
+                 heights={**acq.j.heights, "1": size[2], "2": size[2]})
+    looked = []
+
+    async def look_at(center, folder):  # noqa: ANN001, ANN202
+        looked.append((np.asarray(center, float), folder))
+        if look_yaw_deg is None:
+            raise RemoteError("pose is out of the arm's reach", code="unreachable")
+        c = np.array([center[0], center[1], 0.0])
+        xyz, normals = S.box(look_size, 6000, xy=c[:2], yaw_deg=look_yaw_deg, view_from=[c + [-0.26, 0, 0.37]],
+                             noise=0.0005)
+        from common.api import ViewResult
+        from common.messages import PointCloud
+
+        return ViewResult(view=-1, cloud=PointCloud(xyz=xyz.astype(np.float32), normals=normals.astype(np.float32)),
+                          table=S.table_plane(), center=c, height=look_size[2], scan_poses=np.zeros((0, 4, 4)))
+
+    acq.look_at = look_at  # the cell of this test has no camera: the look's answer is the box as it would be seen
+    view = acq.store.load_view(2)
+    box = object_box(view.center, view.height, view.cloud.xyz, acq.config.turn.object_box_margin)
+    asyncio.run(cell.set_object_box(*box))
+    state = asyncio.run(try_push(acq, 2, view, box, []))
+    assert looked and looked[0][1].name == "push1"
+    return acq, state
+
+
+def test_a_push_after_view_0_is_a_measured_turn_and_the_views_before_it_are_kept(tmp_path):
+    """A yaw-tied tall box needs a push each time the wrist's reach runs out: at view 2 the push is measured on a
+    look at the box (here turned 48 degrees the way the push drives it) and view 2 is scanned again there, its
+    commanded turn grown by the measured turn; views 0 and 1 stay, view 2's old frames are kept aside."""
+    from services.orchestrator.states import State
+
+    acq, state = _pushed_at_view_2(tmp_path, None)  # first see which way the chosen push turns: the look fails
+    assert state == State.SCAN and acq.view == 0  # unmeasured: the views restart, as at view 0
+    sense = acq.j.pushes[0]["sense"]
+
+    acq, state = _pushed_at_view_2(tmp_path / "measured", 48.0 * sense)
+    assert state == State.SCAN and acq.view == 2
+    assert acq.j.turns_deg[:2] == [0.0, 30.0] and acq.j.turns_deg[2] == pytest.approx(60.0 + 48.0 * sense, abs=1.5)
+    assert acq.store.has_view(0) and acq.store.has_view(1) and not acq.store.has_view(2)
+    assert (tmp_path / "measured" / "view_02_pushed1").is_dir()
+    push = acq.j.pushes[0]
+    assert push["from_view"] == 2 and push["turn_deg"] == pytest.approx(48.0 * sense, abs=1.5)
+    assert acq.j.counters.pushes == 1 and acq.j.counters.regrasps == 0 and acq.j.counters.repositions == 0
+    assert acq.j.rescans["2"] == 0  # a fresh re-scan budget where it now stands
+    assert np.asarray(acq.j.centers["2"])[:2] == pytest.approx(np.asarray(push["center"])[:2])
+
+
+def test_a_push_whose_turn_cannot_be_told_restarts_the_views(tmp_path):
+    from services.orchestrator.states import State
+
+    acq, state = _pushed_at_view_2(tmp_path, 30.0, look_size=(0.10, 0.105, 0.109))  # near square from above
+    assert state == State.SCAN and acq.view == 0 and acq.j.turns_deg == [0.0]
+    assert all((tmp_path / f"view_0{k}_pushed1").is_dir() for k in range(3))
+    assert any(d["what"].startswith("the push's turn cannot be told") for d in acq.j.decisions)
