@@ -64,7 +64,7 @@ from services.orchestrator.planning import (
     radial_offset_deg,
     turn_sequences,
 )
-from services.orchestrator.push_step import try_push
+from services.orchestrator.push_step import measure_push, try_push
 from services.orchestrator.recovery import grasp_order, lies_down, plan_mode
 from services.orchestrator.regrasp import (
     RELOCATABLE_STEPS,
@@ -287,22 +287,18 @@ class Acquisition:
     # -------------------------------------------------------------------------------- states
     async def locate(self) -> State:
         """Look at the workspace, find the goal object (cluster nearest the image centre), estimate it."""
-        result = await self.look_at(self._workspace_center(), self.store.path / "locate")
+        T = look_pose(self._workspace_center(), self.config.scan)
+        await self.cell.move("pose", target=T, frame="camera", speed=0.6)
+        frame = await self.cell.capture(self.config.width, self.config.height)
+        self.j.counters.captures += 1
+        from common.session_folder import write_scan
+
+        write_scan(self.store.path / "locate", 0, 0, frame)
+        result = await self.cell.register_static([frame], view=-1, profile=self.config.static_profile,
+                                                 pose_accuracy=self.config.pose_accuracy)
         self._remember_object(-1, result)
         self.decide("located", center=np.round(result.center, 4).tolist(), height=round(result.height, 4))
         return State.SCAN
-
-    async def look_at(self, center: np.ndarray, folder: Path) -> ViewResult:
-        """One capture from the look pose over ``center`` (high enough to see the table round the object), kept
-        in ``folder``, and the object it finds (the cluster nearest the image centre)."""
-        from common.session_folder import write_scan
-
-        await self.cell.move("pose", target=look_pose(center, self.config.scan), frame="camera", speed=0.6)
-        frame = await self.cell.capture(self.config.width, self.config.height)
-        self.j.counters.captures += 1
-        write_scan(folder, 0, 0, frame)
-        return await self.cell.register_static([frame], view=-1, profile=self.config.static_profile,
-                                               pose_accuracy=self.config.pose_accuracy)
 
     def _remember_object(self, view: int, result: ViewResult) -> None:
         self.j.centers[str(view)] = np.asarray(result.center, float).tolist()
@@ -381,6 +377,9 @@ class Acquisition:
                       if k > 0 else None)
             if reason is not None:
                 return self._restart_after_topple(k, reason, result)
+            restart = measure_push(self, k, result)  # a view scanned after a push: its turn is measured here
+            if restart is not None:
+                return restart
             self.store.save_view(result)
             self._remember_object(k, result)
             self.decide("view registered", points=len(result.cloud),

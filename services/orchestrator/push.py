@@ -12,8 +12,8 @@ orientation fixed). The box turns and slides ahead of the pads; in the MuJoCo tw
 a 9.9 x 14.3 cm box about 50 degrees and moves it 4-7 cm outwards (measured). Pushing low (the hand 4 cm
 above the table, at most half the object's height; lower, the wrist meets the table) turns a tall box
 without tipping it.
-What the push achieved is not assumed: it is measured (``measured_turn_deg``) on a look at the object
-afterwards, or, where it cannot be, the views restart from a fresh scan (``push_step.py``).
+What the push achieved is not assumed: it is measured (``measured_turn_deg``) on the view scanned where the
+object then stands, or, where it cannot be, the views restart from a fresh scan (``push_step.py``).
 """
 
 from __future__ import annotations
@@ -139,16 +139,13 @@ def long_side_deg(xy: np.ndarray) -> float | None:
     return float(np.degrees(np.arctan2(axes[1, i], axes[0, i]))) % 180.0
 
 
-def measured_turn_deg(before_xy: np.ndarray, after_xy: np.ndarray, sense: int) -> float | None:
+def measured_turn_deg(before_deg: float, after_deg: float, sense: int) -> float | None:
     """The turn (deg, counter-clockwise seen from above positive) a push of ``sense`` gave an object whose
-    footprint's points were ``before_xy`` and are ``after_xy``, from its long side's direction; None when it
-    cannot be told (a near-square footprint, or a turn outside what a push gives).
+    footprint's long side lay at ``before_deg`` and lies at ``after_deg`` (``long_side_deg``); None when it is
+    not a turn a push gives (``MIN_MEASURED_DEG`` to ``MAX_MEASURED_DEG``).
 
     Why a measure and not the arc: the box slides as it turns, so a 90-degree arc turned the 9.9 x 14.3 cm box
     35 to 70 degrees in the twin. The long side is a direction mod 180, and a push turns the box less than
     that one way: the sense picks the one answer."""
-    a, b = long_side_deg(before_xy), long_side_deg(after_xy)
-    if a is None or b is None:
-        return None
-    turn = (b - a) % 180.0 if sense > 0 else -((a - b) % 180.0)
+    turn = (after_deg - before_deg) % 180.0 if sense > 0 else -((before_deg - after_deg) % 180.0)
     return turn if MIN_MEASURED_DEG <= abs(turn) <= MAX_MEASURED_DEG else None

@@ -9,14 +9,15 @@ and fewer than ``AcquisitionConfig.max_pushes`` pushes were made. It replaces a 
 How: the whole push is dry-run first (over the start, down, round the arc, back and up); then the hand
 closes above the start, runs it, and opens again above the object.
 
-After: what the push achieved is not assumed. After view 0 the hand looks at the object from above and the
-turn is measured from its footprint's long side (``push.measured_turn_deg``). Measured, the push is a turn:
-view ``k`` is scanned again where the object now stands, its commanded turn grown by the measured one, and
-the views before it are kept (a tall box whose only grasp is tied to its yaw needs a push every time the
-wrist's reach runs out, two or three in twelve views). Where the turn cannot be told (a near-square
-footprint, a turn no push gives), or at view 0, the views so far are set aside (``view_KK_pushedN``, kept on
-disk, never fused with later ones) and the views restart at 0 where the object now stands, its expected
-centre the one the push aims at, with a fresh re-scan budget.
+After: what the push achieved is not assumed. After view 0, view ``k`` is scanned again where the push
+aims the object, under a provisional turn (half the arc); once registered, the push's turn is measured from
+its footprint's long side against the view before the push (``push.measured_turn_deg``, ``measure_push``)
+and becomes view ``k``'s commanded turn grown by it: the push is a turn, the views before it kept (a tall box
+whose only grasp is tied to its yaw needs a push each time the wrist's reach runs out, two or three in twelve
+views). Where the turn cannot be told (a footprint near square before or after, a turn no push gives), or at
+view 0, the views so far are set aside (``view_KK_pushedN``, kept on disk, never fused with later ones) and
+the views restart at 0 where the object now stands, its expected centre the one the push aims at, with a
+fresh re-scan budget.
 """
 
 from __future__ import annotations
@@ -29,12 +30,14 @@ from common.api import ViewResult
 from common.errors import RemoteError
 from services.orchestrator.limits import ARM_UNAVAILABLE_CODES
 from services.orchestrator.motion import FULL_OPENING
-from services.orchestrator.push import PushPoses, measured_turn_deg, push_sequences
+from services.orchestrator.push import ARC_DEG, PushPoses, long_side_deg, measured_turn_deg, push_sequences
 from services.orchestrator.views_aside import restart_views
 
 if TYPE_CHECKING:
     from services.orchestrator.states import State
 
+#: Degrees of turn a push is recorded with until the view after it is measured: about what it gives (half the arc).
+PROVISIONAL_DEG = 0.5 * ARC_DEG
 #: The running acquisition (``machine.Acquisition``), typed loosely: that module imports this one.
 Acquisition = Any
 
@@ -90,13 +93,9 @@ async def try_push(acq: Acquisition, k: int, view: ViewResult, box: tuple[np.nda
             acq.decide("push not executable", push=seq.name, code=exc.code, message=exc.message[:200])
             continue
         await _execute(acq, seq, q_above)
-        if k > 0:
-            look = await _look(acq, seq)
-            turned = None if look is None else measured_turn_deg(view.cloud.xyz[:, :2], look.cloud.xyz[:, :2],
-                                                                 seq.sense)
-            if turned is not None:
-                return _continue_views(acq, k, seq, view, look, turned)
-            acq.decide("the push's turn cannot be told from a look at the object", push=seq.name)
+        before = long_side_deg(view.cloud.xyz[:, :2]) if k > 0 else None
+        if before is not None:
+            return _continue_views(acq, k, seq, view, before)
         return _restart_views(acq, k, seq, view)
     acq.decide("no push executable", checks=len(seqs))
     await acq.cell.set_object_box(*box)
@@ -113,39 +112,59 @@ async def _execute(acq: Acquisition, seq: PushPoses, q_above: np.ndarray) -> Non
     await c.gripper(FULL_OPENING, m.gripper_force)
 
 
-async def _look(acq: Acquisition, seq: PushPoses) -> ViewResult | None:
-    """A look at the pushed object from above where the push aims it (``Acquisition.look_at``), or None when the
-    arm cannot look there or the look finds no object."""
-    try:
-        return await acq.look_at(np.asarray(seq.expected_center, float),
-                                 acq.store.path / "pushes" / f"push{len(acq.j.pushes) + 1}")
-    except RemoteError as exc:
-        if exc.code in ARM_UNAVAILABLE_CODES:
-            raise
-        acq.decide("no look at the pushed object", code=exc.code, message=exc.message[:200])
-        return None
-
-
-def _continue_views(acq: Acquisition, k: int, seq: PushPoses, view: ViewResult, look: ViewResult,
-                    turned: float) -> State:
-    """The object was pushed at view ``k`` and turned ``turned`` degrees: view ``k`` is scanned again where the
-    look found it, its commanded turn grown by the turn (``TurnJournal.record_reposition``)."""
+def _continue_views(acq: Acquisition, k: int, seq: PushPoses, view: ViewResult, before_deg: float) -> State:
+    """The object was pushed at view ``k``: view ``k`` is scanned again where the push aims it, under the
+    provisional turn (``TurnJournal.record_reposition``); ``measure_push`` replaces it by the measured one."""
     from services.orchestrator.states import State
 
     j = acq.j
     n = len(j.pushes) + 1
-    shift = np.array([*(np.asarray(look.center, float)[:2] - np.asarray(view.center, float)[:2]), 0.0])
-    j.pushes.append({"push": seq.name, "from_view": k, "sense": seq.sense, "turn_deg": round(float(turned), 2),
+    provisional = seq.sense * PROVISIONAL_DEG
+    shift = np.array([*(np.asarray(seq.expected_center, float)[:2] - np.asarray(view.center, float)[:2]), 0.0])
+    j.pushes.append({"push": seq.name, "from_view": k, "sense": seq.sense, "turn_deg": None,
+                     "provisional_turn_deg": provisional, "long_side_before_deg": round(before_deg, 3),
                      "from_center": np.asarray(view.center, float).tolist(),
-                     "expected_center": [float(x) for x in seq.expected_center],
-                     "center": np.asarray(look.center, float).tolist()})
+                     "expected_center": [float(x) for x in seq.expected_center]})
     j.counters.pushes += 1
     j.rescans[str(k)] = 0  # a new situation: the view's re-scan budget starts again (pushes are bounded)
     acq._plan = None
-    acq.decide("pushed round: the turn measured, view scanned again where the object now stands", push=seq.name,
-               view=k, turn_deg=round(float(turned), 1))
-    acq.turns.record_reposition(k, shift, turn_deg=float(turned), strategy="push", aside=f"pushed{n}")
+    acq.decide("pushed round: view scanned again where the object now stands, its turn to be measured",
+               push=seq.name, view=k)
+    acq.turns.record_reposition(k, shift, turn_deg=provisional, strategy="push", aside=f"pushed{n}")
     return State.SCAN
+
+
+def measure_push(acq: Acquisition, k: int, result: ViewResult) -> State | None:
+    """View ``k`` registered where a push left the object: its commanded turn made the measured one (None: go
+    on with the view), or, where the turn cannot be told, the views restart from the object as it stands (the
+    next state)."""
+    from services.orchestrator.states import State
+
+    j = acq.j
+    push = j.pushes[-1] if j.pushes else None
+    if push is None or push.get("from_view") != k or push.get("turn_deg") is not None \
+            or "provisional_turn_deg" not in push:
+        return None
+    after = long_side_deg(result.cloud.xyz[:, :2])
+    turned = None if after is None else measured_turn_deg(float(push["long_side_before_deg"]), after,
+                                                          int(push["sense"]))
+    if turned is None:
+        push["turn_deg"] = "not told"
+        acq.decide("the push's turn cannot be told from the object's footprint: the views restart here",
+                   view=k, long_side_deg=None if after is None else round(after, 1))
+        center = np.asarray(result.center, float).tolist()
+        restart_views(acq.store.path, j, k, f"pushed{len(j.pushes)}_untold", center, float(result.height))
+        acq.store.save_journal(j.to_dict())
+        return State.SCAN
+    j.turns_deg[k] = float(j.turns_deg[k]) - float(push["provisional_turn_deg"]) + turned
+    push["turn_deg"] = round(turned, 2)
+    entry = next((e for e in reversed(j.regrasps.get(str(k), [])) if e.get("strategy") == "push"), None)
+    if entry is not None:
+        entry.update(turn_deg=round(turned, 2), commanded_turn_deg=float(j.turns_deg[k]))
+    acq.decide("push measured: the view's commanded turn is the push's", view=k, turn_deg=round(turned, 1),
+               commanded_turn_deg=round(float(j.turns_deg[k]), 1))
+    acq.store.save_journal(j.to_dict())
+    return None
 
 
 def _restart_views(acq: Acquisition, k: int, seq: PushPoses, view: ViewResult) -> State:

@@ -163,26 +163,34 @@ def test_the_pushed_box_is_picked_where_it_now_stands(tmp_path):
                                                                  (-80.0, 50.0, -1, -50.0)])
 def test_a_push_s_turn_is_measured_from_the_footprint_s_long_side_as_partial_views_see_it(before, after, sense, turn):
     size = (0.099, 0.143, 0.109)
-    a = _box(size, (0.60, 0.0), before)
-    b = _box(size, (0.66, 0.03), after)
-    assert measured_turn_deg(a[:, :2], b[:, :2], sense) == pytest.approx(turn, abs=1.5)
+    a = long_side_deg(_box(size, (0.60, 0.0), before)[:, :2])
+    b = long_side_deg(_box(size, (0.66, 0.03), after)[:, :2])
+    assert measured_turn_deg(a, b, sense) == pytest.approx(turn, abs=1.5)
 
 
 def test_a_push_s_turn_is_not_told_from_a_near_square_footprint_or_beyond_what_a_push_gives():
-    square = _box((0.10, 0.108, 0.109), (0.60, 0.0), 0.0)
-    box = _box((0.099, 0.143, 0.109), (0.60, 0.0), 0.0)
-    assert long_side_deg(square[:, :2]) is None
-    assert measured_turn_deg(square[:, :2], _box((0.10, 0.108, 0.109), (0.66, 0.0), 40.0)[:, :2], 1) is None
-    assert measured_turn_deg(box[:, :2], _box((0.099, 0.143, 0.109), (0.62, 0.0), 2.0)[:, :2], 1) is None  # slid
-    assert measured_turn_deg(box[:, :2], _box((0.099, 0.143, 0.109), (0.62, 0.0), 40.0)[:, :2], -1) is None
+    assert long_side_deg(_box((0.10, 0.108, 0.109), (0.60, 0.0), 0.0)[:, :2]) is None
+    assert measured_turn_deg(30.0, 32.0, 1) is None  # slid, hardly turned
+    assert measured_turn_deg(30.0, 70.0, -1) is None  # -140 degrees: more than the pads' whole arc
+    assert measured_turn_deg(30.0, 70.0, 1) == pytest.approx(40.0)
 
 
-def _pushed_at_view_2(tmp_path, look_yaw_deg: float | None, look_size=(0.099, 0.143, 0.109)):  # noqa: ANN202
-    """The 9.9 x 14.3 x 10.9 cm box at view 2 of 12 (views 0-2 taken, re-scans used up), pushed; the look after
-    the push finds it at ``look_yaw_deg`` (None: the look fails). Returns (acquisition, cell, next state)."""
+def _saved_view(size: tuple[float, float, float], center: np.ndarray, yaw_deg: float, k: int):  # noqa: ANN202
+    from common.api import ViewResult
+    from common.messages import PointCloud
+
+    c = np.array([center[0], center[1], 0.0])
+    cams = [c + 0.38 * np.array([-np.cos(np.radians(a)), np.sin(np.radians(a)), 0.0]) + [0, 0, 0.3]
+            for a in (-22.0, 0.0, 22.0)]
+    xyz, normals = S.box(size, 8000, xy=c[:2], yaw_deg=yaw_deg, view_from=cams, noise=0.0005)
+    return ViewResult(view=k, cloud=PointCloud(xyz=xyz.astype(np.float32), normals=normals.astype(np.float32)),
+                      table=S.table_plane(), center=c, height=size[2], scan_poses=np.zeros((0, 4, 4)))
+
+
+def _pushed_at_view_2(tmp_path):  # noqa: ANN202
+    """The 9.9 x 14.3 x 10.9 cm box at view 2 of 12 (views 0-2 taken, re-scans used up), pushed."""
     import asyncio
 
-    from common.errors import RemoteError
     from services.arm.kinematics import Kinematics
     from services.orchestrator.planning import object_box
     from services.orchestrator.push_step import try_push
@@ -195,56 +203,50 @@ def _pushed_at_view_2(tmp_path, look_yaw_deg: float | None, look_size=(0.099, 0.
     acq.j.update(view=2, turns_deg=[0.0, 30.0, 60.0], turn_direction=1, rescans={"2": 2},
                  centers={**acq.j.centers, "1": WORKSPACE.tolist(), "2": WORKSPACE.tolist()},
                  heights={**acq.j.heights, "1": size[2], "2": size[2]})
-    looked = []
-
-    async def look_at(center, folder):  # noqa: ANN001, ANN202
-        looked.append((np.asarray(center, float), folder))
-        if look_yaw_deg is None:
-            raise RemoteError("pose is out of the arm's reach", code="unreachable")
-        c = np.array([center[0], center[1], 0.0])
-        xyz, normals = S.box(look_size, 6000, xy=c[:2], yaw_deg=look_yaw_deg, view_from=[c + [-0.26, 0, 0.37]],
-                             noise=0.0005)
-        from common.api import ViewResult
-        from common.messages import PointCloud
-
-        return ViewResult(view=-1, cloud=PointCloud(xyz=xyz.astype(np.float32), normals=normals.astype(np.float32)),
-                          table=S.table_plane(), center=c, height=look_size[2], scan_poses=np.zeros((0, 4, 4)))
-
-    acq.look_at = look_at  # the cell of this test has no camera: the look's answer is the box as it would be seen
     view = acq.store.load_view(2)
     box = object_box(view.center, view.height, view.cloud.xyz, acq.config.turn.object_box_margin)
     asyncio.run(cell.set_object_box(*box))
-    state = asyncio.run(try_push(acq, 2, view, box, []))
-    assert looked and looked[0][1].name == "push1"
-    return acq, state
+    return acq, asyncio.run(try_push(acq, 2, view, box, []))
 
 
 def test_a_push_after_view_0_is_a_measured_turn_and_the_views_before_it_are_kept(tmp_path):
-    """A yaw-tied tall box needs a push each time the wrist's reach runs out: at view 2 the push is measured on a
-    look at the box (here turned 48 degrees the way the push drives it) and view 2 is scanned again there, its
-    commanded turn grown by the measured turn; views 0 and 1 stay, view 2's old frames are kept aside."""
+    """A yaw-tied tall box needs a push each time the wrist's reach runs out: at view 2 the push is followed by
+    view 2 scanned again where the push aims the box, under a provisional turn; registered there (here turned 48
+    degrees the way the push drives it), its commanded turn becomes the measured one. Views 0 and 1 stay, view
+    2's old frames are kept aside."""
+    from services.orchestrator.push_step import PROVISIONAL_DEG, measure_push
     from services.orchestrator.states import State
 
-    acq, state = _pushed_at_view_2(tmp_path, None)  # first see which way the chosen push turns: the look fails
-    assert state == State.SCAN and acq.view == 0  # unmeasured: the views restart, as at view 0
-    sense = acq.j.pushes[0]["sense"]
-
-    acq, state = _pushed_at_view_2(tmp_path / "measured", 48.0 * sense)
-    assert state == State.SCAN and acq.view == 2
-    assert acq.j.turns_deg[:2] == [0.0, 30.0] and acq.j.turns_deg[2] == pytest.approx(60.0 + 48.0 * sense, abs=1.5)
-    assert acq.store.has_view(0) and acq.store.has_view(1) and not acq.store.has_view(2)
-    assert (tmp_path / "measured" / "view_02_pushed1").is_dir()
+    acq, state = _pushed_at_view_2(tmp_path)
     push = acq.j.pushes[0]
-    assert push["from_view"] == 2 and push["turn_deg"] == pytest.approx(48.0 * sense, abs=1.5)
+    sense = push["sense"]
+    assert state == State.SCAN and acq.view == 2 and push["from_view"] == 2 and push["turn_deg"] is None
+    assert acq.j.turns_deg == [0.0, 30.0, 60.0 + sense * PROVISIONAL_DEG]
+    assert acq.store.has_view(0) and acq.store.has_view(1) and not acq.store.has_view(2)
+    assert (tmp_path / "view_02_pushed1").is_dir()
     assert acq.j.counters.pushes == 1 and acq.j.counters.regrasps == 0 and acq.j.counters.repositions == 0
     assert acq.j.rescans["2"] == 0  # a fresh re-scan budget where it now stands
-    assert np.asarray(acq.j.centers["2"])[:2] == pytest.approx(np.asarray(push["center"])[:2])
+    center = np.asarray(acq.j.centers["2"])
+    assert center[:2] == pytest.approx(np.asarray(push["expected_center"])[:2])
+    # view 2 registered where it now stands, turned 48 degrees: the view goes on, its turn the measured one
+    assert measure_push(acq, 2, _saved_view((0.099, 0.143, 0.109), center, 48.0 * sense, 2)) is None
+    assert acq.j.turns_deg[2] == pytest.approx(60.0 + 48.0 * sense, abs=1.5)
+    assert push["turn_deg"] == pytest.approx(48.0 * sense, abs=1.5)
+    assert acq.j.regrasps["2"][-1]["commanded_turn_deg"] == pytest.approx(acq.j.turns_deg[2])
+    assert measure_push(acq, 2, _saved_view((0.099, 0.143, 0.109), center, 10.0, 2)) is None  # measured once
+    assert acq.j.turns_deg[2] == pytest.approx(60.0 + 48.0 * sense, abs=1.5)
 
 
 def test_a_push_whose_turn_cannot_be_told_restarts_the_views(tmp_path):
+    from services.orchestrator.push_step import measure_push
     from services.orchestrator.states import State
 
-    acq, state = _pushed_at_view_2(tmp_path, 30.0, look_size=(0.10, 0.105, 0.109))  # near square from above
-    assert state == State.SCAN and acq.view == 0 and acq.j.turns_deg == [0.0]
-    assert all((tmp_path / f"view_0{k}_pushed1").is_dir() for k in range(3))
+    acq, _ = _pushed_at_view_2(tmp_path)
+    (tmp_path / "view_02" / "scan_0").mkdir(parents=True)  # view 2's scans after the push
+    center = np.asarray(acq.j.centers["2"])
+    square = _saved_view((0.10, 0.105, 0.109), center, 30.0, 2)  # near square from every side
+    assert measure_push(acq, 2, square) == State.SCAN
+    assert acq.view == 0 and acq.j.turns_deg == [0.0]
+    assert all((tmp_path / f"view_0{k}_pushed1_untold").is_dir() for k in range(3))
+    assert (tmp_path / "view_02_pushed1").is_dir() and not (tmp_path / "view_02").exists()
     assert any(d["what"].startswith("the push's turn cannot be told") for d in acq.j.decisions)
