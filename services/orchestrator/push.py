@@ -39,6 +39,10 @@ BACK_OFF = 0.05
 FACING_COS = 0.35
 #: m above the table the hand pushes at: low, so a tall box turns, not tips (lower, the wrist meets the table).
 PUSH_HEIGHT = 0.04
+#: Degrees the hand is pitched down for the pushes offered after the level ones. Near the base the level hand's
+#: low poses are out of reach (PAPRAS kinematics: none at 0.28-0.40 m from the base, 4-6 cm up); pitched 30
+#: degrees, every one from 0.28 m out is reached. The pad tips push at ``PUSH_HEIGHT`` all the same.
+PUSH_PITCHES_DEG = (0.0, 30.0)
 
 
 #: A footprint whose long side is under this many times its short side has no long side to measure a turn by.
@@ -62,11 +66,14 @@ class PushPoses:
     expected_center: np.ndarray  # where the footprint's centre is expected afterwards (scan poses aim there)
 
 
-def _hand(approach: np.ndarray, position: np.ndarray) -> np.ndarray:
-    """A gripper pose approaching horizontally along ``approach``, its z axis up."""
-    x = np.array([approach[0], approach[1], 0.0])
-    x /= np.linalg.norm(x)
-    z = np.array([0.0, 0.0, 1.0])
+def _hand(approach: np.ndarray, position: np.ndarray, pitch_deg: float = 0.0) -> np.ndarray:
+    """A gripper pose approaching along ``approach`` (horizontal), pitched ``pitch_deg`` down about its y, z up-ish."""
+    h = np.array([approach[0], approach[1], 0.0])
+    h /= np.linalg.norm(h)
+    up = np.array([0.0, 0.0, 1.0])
+    a = np.radians(pitch_deg)
+    x = np.cos(a) * h - np.sin(a) * up
+    z = np.sin(a) * h + np.cos(a) * up
     T = np.eye(4)
     T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, np.cross(z, x), z, position
     return T
@@ -86,15 +93,28 @@ def push_sequences(xyz: np.ndarray, height: float, clearance: float, arc_deg: fl
     pts = np.asarray(xyz, float)
     if len(pts) < 10:
         return []
+    g = gripper or GripperConfig()
+    out: list[PushPoses] = []
+    for pitch in PUSH_PITCHES_DEG:
+        level = _pushes(pts, height, clearance, arc_deg, g, pitch)
+        level.sort(key=lambda p: (sense is not None and p.sense != sense, float(np.linalg.norm(p.arc[-1][:2, 3]))))
+        out += level
+    return out
+
+
+def _pushes(pts: np.ndarray, height: float, clearance: float, arc_deg: float, g: GripperConfig,
+            pitch_deg: float) -> list[PushPoses]:
+    """The pushes of ``push_sequences`` with the hand pitched ``pitch_deg`` down (the pad tips at the same height
+    and the same point of the face)."""
     centre, axes, sides = min_area_rectangle(pts[:, :2])
     if not np.all(sides > 0):
         return []
-    g = gripper or GripperConfig()
-    tip = 0.5 * g.pad_length
+    a = np.radians(pitch_deg)
+    tip, drop = 0.5 * g.pad_length * np.cos(a), 0.5 * g.pad_length * np.sin(a)
     # the hand approaches along the line from the base (where the wrist reaches farthest), not square to a face
     # turned away from it
     approach = centre / max(float(np.linalg.norm(centre)), 1e-9)
-    z = min(PUSH_HEIGHT, 0.5 * height)
+    z = min(PUSH_HEIGHT, 0.5 * height) + drop  # the TCP above the pad tips
     faces = [(s * axes[:, i], sides[i] / 2, axes[:, 1 - i], sides[1 - i] / 2) for i in (0, 1) for s in (1.0, -1.0)]
     facing = sorted((f for f in faces if float(f[0] @ approach) < -FACING_COS), key=lambda f: float(f[0] @ approach))
     out: list[PushPoses] = []
@@ -110,8 +130,8 @@ def push_sequences(xyz: np.ndarray, height: float, clearance: float, arc_deg: fl
             turn = 1 if float(lever[0] * approach[1] - lever[1] * approach[0]) > 0 else -1
             steps = max(1, int(np.ceil(arc_deg / CHORD_DEG)))
             contacts = [centre + _rotate(lever, turn * arc_deg * i / steps) for i in range(steps + 1)]
-            arc = [_hand(approach, [*(p - approach * tip), z]) for p in contacts]
-            start = _hand(approach, [*(contacts[0] - approach * (tip + gap)), z])
+            arc = [_hand(approach, [*(p - approach * tip), z], pitch_deg) for p in contacts]
+            start = _hand(approach, [*(contacts[0] - approach * (tip + gap)), z], pitch_deg)
             above = start.copy()
             above[2, 3] = height + clearance
             back = arc[-1].copy()
@@ -119,10 +139,10 @@ def push_sequences(xyz: np.ndarray, height: float, clearance: float, arc_deg: fl
             up = back.copy()
             up[2, 3] = height + clearance
             moved = 0.5 * (contacts[-1] - contacts[0])  # the box follows the pads about half way (measured)
-            out.append(PushPoses(name=f"push_face{fi}_{'left' if end > 0 else 'right'}_end", above=above,
+            name = f"push_face{fi}_{'left' if end > 0 else 'right'}_end" + (f"_pitch{pitch_deg:g}" if pitch_deg else "")
+            out.append(PushPoses(name=name, above=above,
                                  start=start, arc=arc, retreat=[back, up], sense=turn,
                                  expected_center=np.array([*(centre + moved), 0.0])))
-    out.sort(key=lambda p: (sense is not None and p.sense != sense, float(np.linalg.norm(p.arc[-1][:2, 3]))))
     return out
 
 

@@ -22,7 +22,9 @@ def _box(size: tuple[float, float, float], xy: tuple[float, float], yaw_deg: flo
 def test_a_push_starts_before_the_face_towards_the_base_and_drives_one_end_round(xy, yaw):
     size = (0.099, 0.143, 0.109)
     xyz = _box(size, xy, yaw)
-    seqs = push_sequences(xyz, size[2], 0.08)
+    every = push_sequences(xyz, size[2], 0.08)
+    seqs = [s for s in every if "_pitch" not in s.name]  # the level hand's (the pitched ones: below)
+    assert every[:len(seqs)] == seqs and len(every) == 2 * len(seqs)  # level first, then the same pitched
     # both ends of each face towards the base (two faces when the box stands turned), turning either way
     assert len(seqs) in (2, 4) and {s.sense for s in seqs} == {1, -1}
     centre = np.array(xy)
@@ -57,10 +59,39 @@ def test_a_push_starts_before_the_face_towards_the_base_and_drives_one_end_round
         assert push_sequences(xyz, size[2], 0.08, sense=sense)[0].sense == sense
 
 
+def test_near_the_base_the_pitched_hand_s_push_is_reached_where_the_level_hand_s_is_not():
+    """The 5.4 x 15.8 x 15.3 cm slab standing 0.425 m from the base, its long side along the line from it: the level
+    hand's low start 0.32 m out is beyond the wrist (PAPRAS kinematics); pitched 30 degrees down, with its pad tips
+    at the same point and height, it is reached, and so is the whole arc."""
+    from services.arm.kinematics import IKError, Kinematics
+
+    size = (0.158, 0.054, 0.153)
+    seqs = push_sequences(_box(size, (0.425, 0.0), 0.0), size[2], 0.08)
+    kin = Kinematics()
+
+    def reached(T: np.ndarray) -> bool:
+        try:
+            kin.ik(T)
+            return True
+        except IKError:
+            return False
+
+    level = [s for s in seqs if "_pitch" not in s.name]
+    pitched = [s for s in seqs if s.name.endswith("_pitch30")]
+    assert level and len(pitched) == len(level)
+    assert not any(reached(s.start) for s in level)
+    for lv, s in zip(level, pitched, strict=True):
+        tip = s.start[:3, 3] + 0.02 * s.start[:3, 0]  # the pad tips, half a pad ahead of the TCP
+        level_tip = lv.start[:3, 3] + 0.02 * lv.start[:3, 0]
+        assert tip == pytest.approx(level_tip, abs=1e-9) and tip[2] == pytest.approx(PUSH_HEIGHT)
+        assert s.start[:3, 0] @ [0, 0, 1.0] == pytest.approx(-0.5)  # 30 degrees down
+    assert any(all(reached(T) for T in (s.start, *s.arc)) for s in pitched)
+
+
 def test_a_push_keeps_low_on_a_short_object_and_none_is_planned_on_too_few_points():
     size = (0.099, 0.143, 0.03)
     seqs = push_sequences(_box(size, (0.6, 0.0), 0.0), size[2], 0.08)
-    assert all(T[2, 3] <= 0.5 * size[2] + 1e-9 for s in seqs for T in s.arc)
+    assert all((T[:3, 3] + 0.02 * T[:3, 0])[2] <= 0.5 * size[2] + 1e-9 for s in seqs for T in s.arc)  # pad tips
     assert push_sequences(np.zeros((5, 3)), 0.1, 0.08) == []
 
 
