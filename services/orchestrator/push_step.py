@@ -49,6 +49,14 @@ def wanted(acq: Acquisition, k: int, view: ViewResult) -> bool:
     return int(acq.j.rescans.get(str(k), 0)) >= acq.config.max_rescans
 
 
+def _preferred_sense(acq: Acquisition, k: int) -> int | None:
+    """The sense a push should turn the object in: after view 0 the way the views turn it (a push the other
+    way turns it back to where views were taken), at view 0 the way the last push did."""
+    if k > 0 and acq.j.turn_direction:
+        return 1 if acq.j.turn_direction > 0 else -1
+    return int(acq.j.pushes[-1]["sense"]) if acq.j.pushes else None
+
+
 def _moves(seq: PushPoses) -> list[tuple[np.ndarray, bool]]:
     """The straight moves after the one over the start, each with whether it may touch the object."""
     return [(seq.start, False), *((T, True) for T in seq.arc), *((T, True) for T in seq.retreat)]
@@ -76,8 +84,7 @@ async def try_push(acq: Acquisition, k: int, view: ViewResult, box: tuple[np.nda
     if not wanted(acq, k, view):
         return None
     m = acq.config.turn
-    seqs = push_sequences(view.cloud.xyz, view.height, m.clearance,
-                          sense=int(acq.j.pushes[-1]['sense']) if acq.j.pushes else None)
+    seqs = push_sequences(view.cloud.xyz, view.height, m.clearance, sense=_preferred_sense(acq, k))
     acq.decide("pushing the object round: no pick reaches it", pushes=[s.name for s in seqs])
     await acq.motion.escape(view.center, view.height)
     await acq.cell.clear_object_box()

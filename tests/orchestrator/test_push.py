@@ -231,7 +231,7 @@ def _pushed_at_view_2(tmp_path):  # noqa: ANN202
     cell, acq = _standing_tall_box(Kinematics(), tmp_path, rescans=2, size=size)
     for k in (1, 2):
         acq.store.save_view(_view(size, WORKSPACE, k))
-    acq.j.update(view=2, turns_deg=[0.0, 30.0, 60.0], turn_direction=1, rescans={"2": 2},
+    acq.j.update(view=2, turns_deg=[0.0, -30.0, -60.0], turn_direction=-1, rescans={"2": 2},
                  centers={**acq.j.centers, "1": WORKSPACE.tolist(), "2": WORKSPACE.tolist()},
                  heights={**acq.j.heights, "1": size[2], "2": size[2]})
     view = acq.store.load_view(2)
@@ -251,8 +251,9 @@ def test_a_push_after_view_0_is_a_measured_turn_and_the_views_before_it_are_kept
     acq, state = _pushed_at_view_2(tmp_path)
     push = acq.j.pushes[0]
     sense = push["sense"]
+    assert sense == acq.j.turn_direction  # the way the views turn it, not back to where views were taken
     assert state == State.SCAN and acq.view == 2 and push["from_view"] == 2 and push["turn_deg"] is None
-    assert acq.j.turns_deg == [0.0, 30.0, 60.0 + sense * PROVISIONAL_DEG]
+    assert acq.j.turns_deg == [0.0, -30.0, -60.0 + sense * PROVISIONAL_DEG]
     assert acq.store.has_view(0) and acq.store.has_view(1) and not acq.store.has_view(2)
     assert (tmp_path / "view_02_pushed1").is_dir()
     assert acq.j.counters.pushes == 1 and acq.j.counters.regrasps == 0 and acq.j.counters.repositions == 0
@@ -261,11 +262,11 @@ def test_a_push_after_view_0_is_a_measured_turn_and_the_views_before_it_are_kept
     assert center[:2] == pytest.approx(np.asarray(push["expected_center"])[:2])
     # view 2 registered where it now stands, turned 48 degrees: the view goes on, its turn the measured one
     assert measure_push(acq, 2, _saved_view((0.099, 0.143, 0.109), center, 48.0 * sense, 2)) is None
-    assert acq.j.turns_deg[2] == pytest.approx(60.0 + 48.0 * sense, abs=1.5)
+    assert acq.j.turns_deg[2] == pytest.approx(-60.0 + 48.0 * sense, abs=1.5)
     assert push["turn_deg"] == pytest.approx(48.0 * sense, abs=1.5)
     assert acq.j.regrasps["2"][-1]["commanded_turn_deg"] == pytest.approx(acq.j.turns_deg[2])
     assert measure_push(acq, 2, _saved_view((0.099, 0.143, 0.109), center, 10.0, 2)) is None  # measured once
-    assert acq.j.turns_deg[2] == pytest.approx(60.0 + 48.0 * sense, abs=1.5)
+    assert acq.j.turns_deg[2] == pytest.approx(-60.0 + 48.0 * sense, abs=1.5)
 
 
 def test_a_push_whose_turn_cannot_be_told_restarts_the_views(tmp_path):
