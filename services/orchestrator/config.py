@@ -200,7 +200,10 @@ class AcquisitionConfig:
     topple_height_tol_m: float = 0.02
     topple_height_rel: float = 0.25
     max_topple_restarts: int = 1
-    max_pushes: int = 6  # an object no pick reaches turned on the table by a push, at most this often (push.py)
+    # an object no pick reaches turned on the table by a push, at most this often (push.py). A push turns a box
+    # 35-50 degrees; one whose only grasp is tied to its yaw crosses the wrist's unreachable band (about 80 degrees
+    # at 0.60 m) twice in twelve views, two pushes each, besides those that first bring it into reach
+    max_pushes: int = 8
     evaluate: bool = True  # compare with ground truth when the cell knows it (sim)
     # pair registrations during the acquisition (services/orchestrator/incremental.py); off: all at the end
     incremental: bool = True
