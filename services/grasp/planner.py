@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from common.messages import Plane, PointCloud
+from common.stroke import near_stroke
 from services.grasp.boxes import OrientedBox
 from services.grasp.candidates import ObjectFrame, candidate_regions, object_frame
 from services.grasp.circle import estimate_object_center
@@ -35,7 +36,7 @@ from services.grasp.collision import (
 from services.grasp.completion import complete_hidden_sides, horizontal_axes
 from services.grasp.config import GraspPlannerConfig
 from services.grasp.errors import GraspInputError
-from services.grasp.near_stroke import near_stroke_contacts
+from services.grasp.near_stroke import FACE_ANGLE_DEG, near_stroke_contacts
 from services.grasp.pitch import pitch_poses
 from services.grasp.poses import frontal_rotation, grasp_poses, top_down_rotation
 from services.grasp.ranking import RankedPair, rank_region_pair
@@ -269,7 +270,7 @@ def _plan_frontal(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, cf
             continue
         p1, p2 = near_stroke_contacts(inp.xyz, inp.normals, pair.i, pair.j, inp.up, cfg.gripper.max_opening,
                                       cfg.near_stroke_side)
-        if _wider_than_stroke(p1, p2, cfg, rej, "frontal", axis, pair):
+        if _near_stroke_rejected(p1, p2, cfg, rej, "frontal", axis, pair):
             continue
         R, swapped = frontal_rotation(p1, p2, inp.up, np.asarray(cfg.approach_origin, float))
         p_plus, p_minus = (p2, p1) if swapped else (p1, p2)
@@ -318,7 +319,7 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
             continue
         p1, p2 = near_stroke_contacts(xyz, nrm, pair.i, pair.j, inp.up, cfg.gripper.max_opening,
                                       cfg.near_stroke_side)
-        if _wider_than_stroke(p1, p2, cfg, rej, "top_down", axis, pair):
+        if _near_stroke_rejected(p1, p2, cfg, rej, "top_down", axis, pair):
             continue
         R, swapped = top_down_rotation(p1, p2, inp.up, np.asarray(cfg.approach_origin, float))
         p_plus, p_minus = (p2, p1) if swapped else (p1, p2)
@@ -480,16 +481,28 @@ def _object_hits(boxes: dict[str, OrientedBox], xyz: np.ndarray, cfg: GraspPlann
     return 0, None
 
 
-def _wider_than_stroke(p1: np.ndarray, p2: np.ndarray, cfg: GraspPlannerConfig, rej: Rejections, kind: str,
-                       axis: str, pair: RankedPair) -> bool:
-    """Whether contacts settled on their faces (``near_stroke_contacts``) lie farther apart than the stroke: two
-    points of the cloud a little inside a 10.9 cm box's faces passed the pair's width test at 10.6 cm, and the
-    pads met the box. Recorded as ``too_wide``."""
+def _near_stroke_rejected(p1: np.ndarray, p2: np.ndarray, cfg: GraspPlannerConfig, rej: Rejections, kind: str,
+                          axis: str, pair: RankedPair) -> bool:
+    """Whether a pair near the stroke (its contacts ``p1``, ``p2`` as ``near_stroke_contacts`` gave them) is
+    rejected, recorded in ``rej``:
+    - ``not_antipodal``: a contact's normal more than ``FACE_ANGLE_DEG`` off the grasp line, an edge. A pad closing
+      on an edge turns the object in the hand, and across a 6.6 x 10.9 cm box such a pair was 10.5 cm long: the
+      pads met the box twice;
+    - ``too_wide``: settled on their faces the contacts lie farther apart than the stroke (two points a little
+      inside a 10.7-10.9 cm box's faces pass the pair's width test)."""
+    if not near_stroke(float(pair.metrics["width"]), cfg.gripper.max_opening, cfg.near_stroke_side):
+        return False
+    example = {"kind": kind, "axis": axis, "rank": pair.rank, "contacts": [p1, p2]}
+    line = (p1 - p2) / max(float(np.linalg.norm(p1 - p2)), 1e-12)
+    cos_face = np.cos(np.radians(FACE_ANGLE_DEG))
+    if min(abs(float(np.asarray(pair.n_i) @ line)), abs(float(np.asarray(pair.n_j) @ line))) < cos_face:
+        rej.add("not_antipodal", example={**example, "why": "an edge contact near the stroke"})
+        return True
     width = float(np.linalg.norm(p1 - p2))
     if width <= cfg.gripper.max_opening:
         return False
-    rej.add("too_wide", example={"kind": kind, "axis": axis, "rank": pair.rank, "contacts": [p1, p2],
-                                 "width": width, "why": "its faces lie farther apart than the gripper opens"})
+    rej.add("too_wide", example={**example, "width": width,
+                                 "why": "its faces lie farther apart than the gripper opens"})
     return True
 
 

@@ -106,3 +106,24 @@ def test_a_box_a_little_wider_than_the_stroke_gets_no_grasp_across_it(mode, widt
         plan = _plan((0.1431, width, 0.1087), seed=seed, mode=mode)
         assert plan.grasps == [], [round(g.width, 4) for g in plan.grasps]
         assert plan.rejections.counts.get("too_wide", 0) > 0
+
+
+def test_a_pair_near_the_stroke_with_an_edge_contact_is_not_antipodal():
+    """A pair 10.5 cm long across a turned 6.6 x 10.9 cm box, one contact on an edge (its normal 70 degrees off the
+    line): a pad closing on an edge turns the box in the hand, and with under 5 mm a side it does not fit."""
+    from services.grasp.planner import _near_stroke_rejected
+    from services.grasp.ranking import RankedPair
+    from services.grasp.result import Rejections
+
+    p1, p2 = np.array([0.6, 0.0525, 0.1]), np.array([0.6, -0.0525, 0.1])
+    cfg = GraspPlannerConfig()
+    square = RankedPair(i=0, j=1, rank=9.0, metrics={"width": 0.105}, n_i=np.array([0.0, 1.0, 0.0]),
+                        n_j=np.array([0.0, -1.0, 0.0]))
+    edge = RankedPair(i=0, j=1, rank=9.0, metrics={"width": 0.105}, n_i=np.array([0.94, 0.342, 0.0]),
+                      n_j=np.array([0.0, -1.0, 0.0]))
+    rej = Rejections()
+    assert not _near_stroke_rejected(p1, p2, cfg, rej, "frontal", "y", square)
+    assert _near_stroke_rejected(p1, p2, cfg, rej, "frontal", "y", edge)
+    assert rej.counts == {"not_antipodal": 1}
+    far = RankedPair(i=0, j=1, rank=9.0, metrics={"width": 0.06}, n_i=edge.n_i, n_j=edge.n_j)
+    assert not _near_stroke_rejected(p1 * [1, 0.57, 1], p2 * [1, 0.57, 1], cfg, rej, "frontal", "y", far)
