@@ -32,7 +32,6 @@ import numpy as np
 
 from common.footprint import min_area_rectangle
 from common.messages import Grasp
-from common.stroke import near_stroke
 from services.grasp.hold import HoldModel, estimate_mass, hold_ratio
 from services.grasp.stray import stray_mask
 
@@ -98,9 +97,6 @@ def grasp_order(grasps: list[Grasp], lying: bool, slipped: list[str], xyz: np.nd
     ``center`` and top ``height``.
 
     - a kind that slipped at this view goes after the kinds that did not;
-    - a grasp near the stroke (``common.stroke``) with a contact on a mirrored-in face after the others: with
-      under 5 mm a side, that guessed face decides whether the object fits between the pads at all (a
-      6.6 x 10.9 cm box's 10.9 cm side, mirrored at 10.5 cm, was tried first and met the pads twice);
     - a lying object: top-down grasps before frontal ones;
     - grasps approached from the side (``side_approach``) after the radial-ish ones: the arm reaches far
       low poses only roughly radially;
@@ -124,8 +120,6 @@ def grasp_order(grasps: list[Grasp], lying: bool, slipped: list[str], xyz: np.nd
         side = bool(side_approach[i]) if side_approach is not None else False
         lower = float(np.asarray(g.contacts, float)[:, 2].mean()) if slipped else 0.0
         edge = tall and on_an_edge(g)
-        guessed = near_stroke(g.width) and float(g.metrics.get("inferred_contacts", 0.0)) > 0
-        return (g.kind in slipped, guessed, lying and g.kind != "top_down", side, edge, int(ratio / 0.25),
-                round(lower, 3), i)
+        return (g.kind in slipped, lying and g.kind != "top_down", side, edge, int(ratio / 0.25), round(lower, 3), i)
 
     return sorted(range(len(grasps)), key=key)

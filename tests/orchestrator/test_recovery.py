@@ -175,20 +175,6 @@ def _grasp(kind: str, z: float, x: float = 0.5) -> Grasp:
     return Grasp(kind=kind, contacts=np.array([[x, -0.03, z], [x, 0.03, z]]), width=0.06)
 
 
-def test_a_grasp_near_the_stroke_on_a_mirrored_face_goes_after_the_others():
-    """A 6.6 x 10.9 cm box whose 10.9 cm side was mirrored in at 10.5 cm: that grasp met the pads twice before its
-    grasp across 6.6 cm was tried; the guessed face cannot say the box fits in a 10.6 cm stroke."""
-    xyz = np.random.default_rng(0).uniform([0.45, -0.055, 0.0], [0.55, 0.055, 0.238], (800, 3))
-    center = np.array([0.5, 0.0, 0.0])
-    wide = Grasp(kind="frontal", contacts=np.array([[0.5, -0.0525, 0.12], [0.5, 0.0525, 0.12]]), width=0.105,
-                 metrics={"inferred_contacts": 1.0})
-    thin = Grasp(kind="frontal", contacts=np.array([[0.467, 0.0, 0.05], [0.533, 0.0, 0.05]]), width=0.066,
-                 metrics={"inferred_contacts": 1.0})
-    assert grasp_order([wide, thin], False, [], xyz, center, 0.238) == [1, 0]
-    seen = Grasp(kind="frontal", contacts=wide.contacts, width=0.105, metrics={"inferred_contacts": 0.0})
-    assert grasp_order([seen, thin], False, [], xyz, center, 0.238)[0] == 0  # both faces seen: its place kept
-
-
 def test_the_order_of_grasps_after_a_slip_and_on_a_lying_object():
     xyz = np.random.default_rng(0).uniform([0.45, -0.03, 0.0], [0.55, 0.03, 0.06], (500, 3))
     center = np.array([0.5, 0.0, 0.0])
