@@ -36,7 +36,7 @@ from services.grasp.collision import (
 from services.grasp.completion import complete_hidden_sides, horizontal_axes
 from services.grasp.config import GraspPlannerConfig
 from services.grasp.errors import GraspInputError
-from services.grasp.near_stroke import FACE_ANGLE_DEG, near_stroke_contacts
+from services.grasp.near_stroke import near_stroke_contacts
 from services.grasp.pitch import pitch_poses
 from services.grasp.poses import frontal_rotation, grasp_poses, top_down_rotation
 from services.grasp.ranking import RankedPair, rank_region_pair
@@ -270,9 +270,9 @@ def _plan_frontal(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, cf
             continue
         p1, p2 = near_stroke_contacts(inp.xyz, inp.normals, pair.i, pair.j, inp.up, cfg.gripper.max_opening,
                                       cfg.near_stroke_side)
-        if _near_stroke_rejected(p1, p2, cfg, rej, "frontal", axis, pair):
-            continue
         R, swapped = frontal_rotation(p1, p2, inp.up, np.asarray(cfg.approach_origin, float))
+        if _near_stroke_rejected(p1, p2, R, inp.xyz, cfg, rej, "frontal", axis, pair):
+            continue
         p_plus, p_minus = (p2, p1) if swapped else (p1, p2)
         mid = 0.5 * (p1 + p2)
         tcp = mid + cfg.grasp_depth * R[:, 0]
@@ -319,9 +319,9 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
             continue
         p1, p2 = near_stroke_contacts(xyz, nrm, pair.i, pair.j, inp.up, cfg.gripper.max_opening,
                                       cfg.near_stroke_side)
-        if _near_stroke_rejected(p1, p2, cfg, rej, "top_down", axis, pair):
-            continue
         R, swapped = top_down_rotation(p1, p2, inp.up, np.asarray(cfg.approach_origin, float))
+        if _near_stroke_rejected(p1, p2, R, xyz, cfg, rej, "top_down", axis, pair):
+            continue
         p_plus, p_minus = (p2, p1) if swapped else (p1, p2)
         # the fingertips stop above the table: lift the pads along the approach until their lowest
         # corner clears it (a no-op unless the contacts are within half a pad length of the table)
@@ -481,28 +481,28 @@ def _object_hits(boxes: dict[str, OrientedBox], xyz: np.ndarray, cfg: GraspPlann
     return 0, None
 
 
-def _near_stroke_rejected(p1: np.ndarray, p2: np.ndarray, cfg: GraspPlannerConfig, rej: Rejections, kind: str,
-                          axis: str, pair: RankedPair) -> bool:
-    """Whether a pair near the stroke (its contacts ``p1``, ``p2`` as ``near_stroke_contacts`` gave them) is
-    rejected, recorded in ``rej``:
-    - ``not_antipodal``: a contact's normal more than ``FACE_ANGLE_DEG`` off the grasp line, an edge. A pad closing
-      on an edge turns the object in the hand, and across a 6.6 x 10.9 cm box such a pair was 10.5 cm long: the
-      pads met the box twice;
-    - ``too_wide``: settled on their faces the contacts lie farther apart than the stroke (two points a little
-      inside a 10.7-10.9 cm box's faces pass the pair's width test)."""
+def _near_stroke_rejected(p1: np.ndarray, p2: np.ndarray, R: np.ndarray, xyz: np.ndarray, cfg: GraspPlannerConfig,
+                          rej: Rejections, kind: str, axis: str, pair: RankedPair) -> bool:
+    """Whether a pair near the stroke (its contacts ``p1``, ``p2`` as ``near_stroke_contacts`` gave them, the hand's
+    rotation ``R``) is ``too_wide``, recorded in ``rej``: the object's points (``xyz``) where the pads close, within
+    the pads' length along the approach and their width across it, span more than the stroke along the grasp line.
+
+    Why: the pair's own length is not the object's width between the pads. Two points a little inside a 10.7-10.9
+    cm box's faces pass the pair's width test, and so does a pair from an edge across a turned 6.6 x 10.9 cm box
+    (10.5 cm long): the pads met the box each time."""
     if not near_stroke(float(pair.metrics["width"]), cfg.gripper.max_opening, cfg.near_stroke_side):
         return False
-    example = {"kind": kind, "axis": axis, "rank": pair.rank, "contacts": [p1, p2]}
-    line = (p1 - p2) / max(float(np.linalg.norm(p1 - p2)), 1e-12)
-    cos_face = np.cos(np.radians(FACE_ANGLE_DEG))
-    if min(abs(float(np.asarray(pair.n_i) @ line)), abs(float(np.asarray(pair.n_j) @ line))) < cos_face:
-        rej.add("not_antipodal", example={**example, "why": "an edge contact near the stroke"})
-        return True
-    width = float(np.linalg.norm(p1 - p2))
-    if width <= cfg.gripper.max_opening:
+    mid = 0.5 * (p1 + p2)
+    local = (np.asarray(xyz, float) - mid) @ R
+    g = cfg.gripper
+    # along the approach: from half a pad before the contacts to half a pad past where the grasp pushes the TCP
+    band = ((local[:, 0] >= -0.5 * g.pad_length) & (local[:, 0] <= cfg.grasp_depth + 0.5 * g.pad_length)
+            & (np.abs(local[:, 2]) <= 0.5 * g.pad_width))
+    span = float(np.ptp(local[band, 1])) if np.count_nonzero(band) >= 2 else float(np.linalg.norm(p1 - p2))
+    if span <= g.max_opening:
         return False
-    rej.add("too_wide", example={**example, "width": width,
-                                 "why": "its faces lie farther apart than the gripper opens"})
+    rej.add("too_wide", example={"kind": kind, "axis": axis, "rank": pair.rank, "contacts": [p1, p2], "width": span,
+                                 "why": "the object spans more than the stroke where the pads close"})
     return True
 
 

@@ -108,22 +108,24 @@ def test_a_box_a_little_wider_than_the_stroke_gets_no_grasp_across_it(mode, widt
         assert plan.rejections.counts.get("too_wide", 0) > 0
 
 
-def test_a_pair_near_the_stroke_with_an_edge_contact_is_not_antipodal():
-    """A pair 10.5 cm long across a turned 6.6 x 10.9 cm box, one contact on an edge (its normal 70 degrees off the
-    line): a pad closing on an edge turns the box in the hand, and with under 5 mm a side it does not fit."""
+def test_a_pair_near_the_stroke_across_a_turned_box_wider_than_the_stroke_is_too_wide():
+    """A pair 10.5 cm long across a 6.6 x 10.9 cm box turned 30 degrees (one contact on an edge): the box spans more
+    than the stroke where the pads close, so the grasp is too wide; the same pair square across a 9.3 cm box is kept."""
     from services.grasp.planner import _near_stroke_rejected
+    from services.grasp.poses import frontal_rotation
     from services.grasp.ranking import RankedPair
     from services.grasp.result import Rejections
 
-    p1, p2 = np.array([0.6, 0.0525, 0.1]), np.array([0.6, -0.0525, 0.1])
     cfg = GraspPlannerConfig()
-    square = RankedPair(i=0, j=1, rank=9.0, metrics={"width": 0.105}, n_i=np.array([0.0, 1.0, 0.0]),
-                        n_j=np.array([0.0, -1.0, 0.0]))
-    edge = RankedPair(i=0, j=1, rank=9.0, metrics={"width": 0.105}, n_i=np.array([0.94, 0.342, 0.0]),
+    p1, p2 = np.array([0.6, 0.0525, 0.1]), np.array([0.6, -0.0525, 0.1])
+    R, _ = frontal_rotation(p1, p2, UP, np.zeros(3))
+    pair = RankedPair(i=0, j=1, rank=9.0, metrics={"width": 0.105}, n_i=np.array([0.94, 0.342, 0.0]),
                       n_j=np.array([0.0, -1.0, 0.0]))
+    wide, _ = S.box((0.066, 0.109, 0.238), 12000, xy=CENTER, yaw_deg=30.0, view_from=_cams(), noise=0.001)
+    narrow, _ = S.box((0.069, 0.093, 0.171), 12000, xy=CENTER, view_from=_cams(), noise=0.001)
     rej = Rejections()
-    assert not _near_stroke_rejected(p1, p2, cfg, rej, "frontal", "y", square)
-    assert _near_stroke_rejected(p1, p2, cfg, rej, "frontal", "y", edge)
-    assert rej.counts == {"not_antipodal": 1}
-    far = RankedPair(i=0, j=1, rank=9.0, metrics={"width": 0.06}, n_i=edge.n_i, n_j=edge.n_j)
-    assert not _near_stroke_rejected(p1 * [1, 0.57, 1], p2 * [1, 0.57, 1], cfg, rej, "frontal", "y", far)
+    assert _near_stroke_rejected(p1, p2, R, wide, cfg, rej, "frontal", "y", pair)
+    assert rej.counts == {"too_wide": 1}
+    assert not _near_stroke_rejected(p1, p2, R, narrow, cfg, rej, "frontal", "y", pair)
+    far = RankedPair(i=0, j=1, rank=9.0, metrics={"width": 0.06}, n_i=pair.n_i, n_j=pair.n_j)
+    assert not _near_stroke_rejected(p1, p2, R, wide, cfg, rej, "frontal", "y", far)  # not near the stroke
