@@ -271,7 +271,7 @@ def _plan_frontal(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, cf
         p1, p2 = near_stroke_contacts(inp.xyz, inp.normals, pair.i, pair.j, inp.up, cfg.gripper.max_opening,
                                       cfg.near_stroke_side)
         R, swapped = frontal_rotation(p1, p2, inp.up, np.asarray(cfg.approach_origin, float))
-        if _near_stroke_rejected(p1, p2, R, inp.xyz, cfg, rej, "frontal", axis, pair):
+        if _near_stroke_rejected(p1, p2, R, inp.xyz[:inp.n_observed], cfg, rej, "frontal", axis, pair):
             continue
         p_plus, p_minus = (p2, p1) if swapped else (p1, p2)
         mid = 0.5 * (p1 + p2)
@@ -320,7 +320,7 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
         p1, p2 = near_stroke_contacts(xyz, nrm, pair.i, pair.j, inp.up, cfg.gripper.max_opening,
                                       cfg.near_stroke_side)
         R, swapped = top_down_rotation(p1, p2, inp.up, np.asarray(cfg.approach_origin, float))
-        if _near_stroke_rejected(p1, p2, R, xyz, cfg, rej, "top_down", axis, pair):
+        if _near_stroke_rejected(p1, p2, R, xyz[:n_observed], cfg, rej, "top_down", axis, pair):
             continue
         p_plus, p_minus = (p2, p1) if swapped else (p1, p2)
         # the fingertips stop above the table: lift the pads along the approach until their lowest
@@ -484,7 +484,8 @@ def _object_hits(boxes: dict[str, OrientedBox], xyz: np.ndarray, cfg: GraspPlann
 def _near_stroke_rejected(p1: np.ndarray, p2: np.ndarray, R: np.ndarray, xyz: np.ndarray, cfg: GraspPlannerConfig,
                           rej: Rejections, kind: str, axis: str, pair: RankedPair) -> bool:
     """Whether a pair near the stroke (its contacts ``p1``, ``p2`` as ``near_stroke_contacts`` gave them, the hand's
-    rotation ``R``) is ``too_wide``, recorded in ``rej``: the object's points (``xyz``) where the pads close, within
+    rotation ``R``) is ``too_wide``, recorded in ``rej``: the object's seen points (``xyz``, not the mirrored-in
+    ones, which sit where a guess put them) where the pads close, within
     the pads' length along the approach and their width across it, span more than the stroke along the grasp line.
 
     Why: the pair's own length is not the object's width between the pads. Two points a little inside a 10.7-10.9
@@ -495,9 +496,10 @@ def _near_stroke_rejected(p1: np.ndarray, p2: np.ndarray, R: np.ndarray, xyz: np
     mid = 0.5 * (p1 + p2)
     local = (np.asarray(xyz, float) - mid) @ R
     g = cfg.gripper
-    # along the approach: from half a pad before the contacts to half a pad past where the grasp pushes the TCP
-    band = ((local[:, 0] >= -0.5 * g.pad_length) & (local[:, 0] <= cfg.grasp_depth + 0.5 * g.pad_length)
-            & (np.abs(local[:, 2]) <= 0.5 * g.pad_width))
+    # along the approach: the pads' length about where they stand fully open (the grasp's push past the contacts,
+    # less the linkage's pull-back at the whole stroke)
+    pads_x = cfg.grasp_depth - g.open_retraction
+    band = (np.abs(local[:, 0] - pads_x) <= 0.5 * g.pad_length) & (np.abs(local[:, 2]) <= 0.5 * g.pad_width)
     span = float(np.ptp(local[band, 1])) if np.count_nonzero(band) >= 2 else float(np.linalg.norm(p1 - p2))
     if span <= g.max_opening:
         return False
