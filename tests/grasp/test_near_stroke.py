@@ -115,8 +115,9 @@ def test_a_pair_near_the_stroke_across_a_turned_box_wider_than_the_stroke_is_too
     from services.grasp.poses import frontal_rotation
     from services.grasp.ranking import RankedPair
     from services.grasp.result import Rejections
+    from services.grasp.service import GraspService
 
-    cfg = GraspPlannerConfig()
+    cfg = GraspService.planner_config()  # as the service plans: the TCP 1 cm past the contacts
     p1, p2 = np.array([0.6, 0.0525, 0.1]), np.array([0.6, -0.0525, 0.1])
     R, _ = frontal_rotation(p1, p2, UP, np.zeros(3))
     pair = RankedPair(i=0, j=1, rank=9.0, metrics={"width": 0.105}, n_i=np.array([0.94, 0.342, 0.0]),
