@@ -130,3 +130,20 @@ def test_a_pair_near_the_stroke_across_a_turned_box_wider_than_the_stroke_is_too
     assert not _near_stroke_rejected(p1, p2, R, narrow, cfg, rej, "frontal", "y", pair)
     far = RankedPair(i=0, j=1, rank=9.0, metrics={"width": 0.06}, n_i=pair.n_i, n_j=pair.n_j)
     assert not _near_stroke_rejected(p1, p2, R, wide, cfg, rej, "frontal", "y", far)  # not near the stroke
+
+
+def test_a_near_stroke_pair_from_an_edge_keeps_its_two_points():
+    """Settling contacts on their faces is for two faces: a contact on an edge (its normal 70 degrees off the line)
+    keeps the pair's own points, which moved the pads of a 9.96 cm edge pair into a 9.3 cm box when settled."""
+    from services.grasp.near_stroke import near_stroke_contacts
+
+    xyz = np.array([[0.6, 0.0498, 0.104], [0.6, -0.0498, 0.096], [0.605, 0.0498, 0.1], [0.6, -0.0502, 0.1],
+                    [0.598, -0.0497, 0.102], [0.603, -0.0501, 0.098]])
+    edge = np.array([[0.94, 0.342, 0.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, -1.0, 0.0],
+                     [0.0, -1.0, 0.0]])
+    p1, p2 = near_stroke_contacts(xyz, edge, 0, 1, UP, STROKE, 0.005)
+    assert p1 == pytest.approx(xyz[0]) and p2 == pytest.approx(xyz[1])
+    square = edge.copy()
+    square[0] = [0.0, 1.0, 0.0]
+    p1, p2 = near_stroke_contacts(xyz, square, 0, 1, UP, STROKE, 0.005)
+    assert p1[2] == pytest.approx(p2[2])  # two faces: levelled
