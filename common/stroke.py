@@ -3,7 +3,7 @@
 A parallel gripper opened to its whole stroke clears an object ``width`` wide by half the difference a side.
 Under about 5 mm a side that room is mostly taken by the camera's location error (the hand-eye and joint
 noise put the object 2-3 mm off on the twin's robot profile), so such a grasp is planned and opened with
-care: its grasp line level (``services/grasp/poses.level_contacts``) and the whole stroke open
+care: on its faces and level (``services/grasp/near_stroke.py``) and the whole stroke open
 (``services/orchestrator/motion.pick_opening``).
 """
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields
 
-from common.stroke import NEAR_STROKE_SIDE
+from common.stroke import NEAR_STROKE_SIDE, STROKE
 from services.grasp.errors import GraspConfigError
 
 
@@ -31,7 +31,7 @@ class GripperConfig:
     """
 
     name: str = "RH-P12-RN(A)"
-    max_opening: float = 0.106
+    max_opening: float = STROKE
     min_opening: float = 0.0
     finger_length: float = 0.086
     pad_width: float = 0.026
@@ -138,8 +138,8 @@ class GraspPlannerConfig:
 
     near_stroke_side: float = NEAR_STROKE_SIDE
     """m a side the fully open pads clear a grasp's width under which the grasp is near the stroke
-    (``common.stroke``): its grasp line is then levelled (``poses.level_contacts``). There the pads fit beside
-    the object only square to its faces. Other grasps keep the line through their two contacts."""
+    (``common.stroke``): its contacts are then settled on their faces and levelled (``near_stroke.py``). There the
+    pads fit beside the object only square to its faces. Other grasps keep the line through their two contacts."""
 
     max_contact_angle_deg: float = 20.0
     """Both contact normals must lie within this angle of the grasp line (``not_antipodal``). Not in

@@ -93,22 +93,23 @@ def push_sequences(xyz: np.ndarray, height: float, clearance: float, arc_deg: fl
     pts = np.asarray(xyz, float)
     if len(pts) < 10:
         return []
+    rect = min_area_rectangle(pts[:, :2])
+    if not np.all(rect[2] > 0):
+        return []
     g = gripper or GripperConfig()
     out: list[PushPoses] = []
     for pitch in PUSH_PITCHES_DEG:
-        level = _pushes(pts, height, clearance, arc_deg, g, pitch)
+        level = _pushes(rect, height, clearance, arc_deg, g, pitch)
         level.sort(key=lambda p: (sense is not None and p.sense != sense, float(np.linalg.norm(p.arc[-1][:2, 3]))))
         out += level
     return out
 
 
-def _pushes(pts: np.ndarray, height: float, clearance: float, arc_deg: float, g: GripperConfig,
-            pitch_deg: float) -> list[PushPoses]:
-    """The pushes of ``push_sequences`` with the hand pitched ``pitch_deg`` down (the pad tips at the same height
-    and the same point of the face)."""
-    centre, axes, sides = min_area_rectangle(pts[:, :2])
-    if not np.all(sides > 0):
-        return []
+def _pushes(rect: tuple[np.ndarray, np.ndarray, np.ndarray], height: float, clearance: float, arc_deg: float,
+            g: GripperConfig, pitch_deg: float) -> list[PushPoses]:
+    """The pushes of ``push_sequences`` round the footprint's rectangle ``rect`` (centre, axes, sides) with the hand
+    pitched ``pitch_deg`` down (the pad tips at the same height and the same point of the face)."""
+    centre, axes, sides = rect
     a = np.radians(pitch_deg)
     tip, drop = 0.5 * g.pad_length * np.cos(a), 0.5 * g.pad_length * np.sin(a)
     # the hand approaches along the line from the base (where the wrist reaches farthest), not square to a face

@@ -119,6 +119,13 @@ async def _execute(acq: Acquisition, seq: PushPoses, q_above: np.ndarray) -> Non
     await c.gripper(FULL_OPENING, m.gripper_force)
 
 
+def _record(seq: PushPoses, k: int, view: ViewResult) -> dict:
+    """The journal's record of push ``seq`` made at view ``k``: which, its sense, from where, to where expected."""
+    return {"push": seq.name, "from_view": k, "sense": seq.sense,
+            "from_center": np.asarray(view.center, float).tolist(),
+            "expected_center": [float(x) for x in seq.expected_center]}
+
+
 def _continue_views(acq: Acquisition, k: int, seq: PushPoses, view: ViewResult, before_deg: float) -> State:
     """The object was pushed at view ``k``: view ``k`` is scanned again where the push aims it, under the
     provisional turn (``TurnJournal.record_reposition``); ``measure_push`` replaces it by the measured one."""
@@ -128,10 +135,8 @@ def _continue_views(acq: Acquisition, k: int, seq: PushPoses, view: ViewResult, 
     n = len(j.pushes) + 1
     provisional = seq.sense * PROVISIONAL_DEG
     shift = np.array([*(np.asarray(seq.expected_center, float)[:2] - np.asarray(view.center, float)[:2]), 0.0])
-    j.pushes.append({"push": seq.name, "from_view": k, "sense": seq.sense, "turn_deg": None,
-                     "provisional_turn_deg": provisional, "long_side_before_deg": round(before_deg, 3),
-                     "from_center": np.asarray(view.center, float).tolist(),
-                     "expected_center": [float(x) for x in seq.expected_center]})
+    j.pushes.append({**_record(seq, k, view), "turn_deg": None, "measured": None, "provisional_turn_deg": provisional,
+                     "long_side_before_deg": round(before_deg, 3)})
     j.counters.pushes += 1
     j.rescans[str(k)] = 0  # a new situation: the view's re-scan budget starts again (pushes are bounded)
     acq._plan = None
@@ -149,14 +154,13 @@ def measure_push(acq: Acquisition, k: int, result: ViewResult) -> State | None:
 
     j = acq.j
     push = j.pushes[-1] if j.pushes else None
-    if push is None or push.get("from_view") != k or push.get("turn_deg") is not None \
-            or "provisional_turn_deg" not in push:
+    if push is None or push.get("from_view") != k or "measured" not in push or push["measured"] is not None:
         return None
     after = long_side_deg(result.cloud.xyz[:, :2])
     turned = None if after is None else measured_turn_deg(float(push["long_side_before_deg"]), after,
                                                           int(push["sense"]))
     if turned is None:
-        push["turn_deg"] = "not told"
+        push["measured"] = False
         acq.decide("the push's turn cannot be told from the object's footprint: the views restart here",
                    view=k, long_side_deg=None if after is None else round(after, 1))
         center = np.asarray(result.center, float).tolist()
@@ -164,7 +168,7 @@ def measure_push(acq: Acquisition, k: int, result: ViewResult) -> State | None:
         acq.store.save_journal(j.to_dict())
         return State.SCAN
     j.turns_deg[k] = float(j.turns_deg[k]) - float(push["provisional_turn_deg"]) + turned
-    push["turn_deg"] = round(turned, 2)
+    push.update(turn_deg=round(turned, 2), measured=True)
     entry = next((e for e in reversed(j.regrasps.get(str(k), [])) if e.get("strategy") == "push"), None)
     if entry is not None:
         entry.update(turn_deg=round(turned, 2), commanded_turn_deg=float(j.turns_deg[k]))
@@ -182,8 +186,7 @@ def _restart_views(acq: Acquisition, k: int, seq: PushPoses, view: ViewResult) -
     n = len(j.pushes) + 1
     center = [float(x) for x in seq.expected_center]
     restart_views(acq.store.path, j, k, f"pushed{n}", center, view.height)
-    j.pushes.append({"push": seq.name, "from_view": k, "sense": seq.sense,
-                     "from_center": np.asarray(view.center, float).tolist(), "expected_center": center})
+    j.pushes.append(_record(seq, k, view))
     j.counters.pushes += 1
     acq._plan = None
     acq.decide("pushed round: the views restart where it now stands (the earlier views are kept aside)",
