@@ -142,6 +142,10 @@ class TurnMotion:
 
     lift: float = 0.02  # m above the grasp before turning
     clearance: float = 0.08  # m above the object's top for joint-space moves near it
+    # m: the same for a top-down pick's chains tried after all others. The PAPRAS wrist pointing down reaches no
+    # higher than about 0.16-0.18 m at 0.35-0.45 m from the base, so ``clearance`` above a 10 cm object leaves
+    # it out of reach there; the arm checks every joint-space move against the object's box all the same
+    low_clearance: float = 0.04
     speed_scale: float = 0.6
     approach_speed_scale: float = 0.3
     gripper_force: float = 30.0
@@ -159,7 +163,8 @@ class TurnMotion:
             self.relocation = RelocationConfig(**_known_keys(RelocationConfig, self.relocation, "turn.relocation"))
         if not isinstance(self.relocation, RelocationConfig):
             raise _fail("turn.relocation", "must be a map", self.relocation)
-        for name, hi in (("lift", 0.5), ("clearance", 1.0), ("open_margin", 0.2), ("object_box_margin", 0.2)):
+        for name, hi in (("lift", 0.5), ("clearance", 1.0), ("low_clearance", 1.0), ("open_margin", 0.2),
+                         ("object_box_margin", 0.2)):
             _number(f"turn.{name}", getattr(self, name), 0.0, hi)
         for name in ("speed_scale", "approach_speed_scale"):
             _number(f"turn.{name}", getattr(self, name), 0.0, 1.0, lo_open=True)

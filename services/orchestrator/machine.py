@@ -520,10 +520,10 @@ class Acquisition:
             grasp = self._plan.grasps[gi]
             clear = (box, footprint, pick_opening(grasp.width, cfg.turn.open_margin, False))
             sequences = sorted(turn_sequences(grasp, cfg.turn, height, clear),
-                               key=lambda sq: (fixed is not None and sq.direction != fixed,
+                               key=lambda sq: (fixed is not None and sq.direction != fixed, sq.low_above,
                                                abs(offsets[gi] + sq.direction * cfg.turn_deg)))
             out += [(gi, grasp, sq) for sq in sequences if fixed is None or sq.direction == fixed]
-        return out
+        return sorted(out, key=lambda c: c[2].low_above)  # the lowered ones after every other grasp's
 
     async def _attempt(self, k: int, gi: int, grasp: Grasp, seq: TurnPoses, q_start: np.ndarray,
                        box: tuple[np.ndarray, np.ndarray], signature: str, failures: list[str]) -> State | None:

@@ -5,7 +5,7 @@ No I/O here, so the choices can be tested and reasoned about without a robot.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -66,6 +66,7 @@ class TurnPoses:
     above_retreat: np.ndarray
     direction: int = 1  # +1: the planner's turn (counter-clockwise seen from above); -1: the mirror turn
     carry_from: np.ndarray | None = None  # a relocated set-down: where the turn ends before the carry (regrasp.py)
+    low_above: bool = False  # ``above_*`` at ``TurnMotion.low_clearance``: tried after every other chain
 
     def straight_moves(self, center: np.ndarray) -> list[ChainMove]:
         """Every move after ``above_pregrasp``, in order: all straight lines, so that once the arm stands at
@@ -150,7 +151,7 @@ def turn_sequences(grasp: Grasp, motion: TurnMotion, object_height: float,
     safe_z = object_height + motion.clearance
     poses = {name: p.matrix() for name, p in grasp.poses.items()}
     order = _base_side_first if grasp.kind == "top_down" else _offset_order
-    out = []
+    out: list[TurnPoses] = []
     for direction in (1, -1):
         for name in sorted((n for n in poses if n.startswith("grasp")), key=order):
             suffix = name[len("grasp"):]
@@ -170,6 +171,10 @@ def turn_sequences(grasp: Grasp, motion: TurnMotion, object_height: float,
                                  lifted=_lift(g, motion.lift), turned_lifted=_lift(turn, motion.lift),
                                  turned=turn, retreat=retreat, above_retreat=_at_height(retreat, safe_z),
                                  direction=direction))
+    if grasp.kind == "top_down" and motion.low_clearance < motion.clearance:
+        low_z = object_height + motion.low_clearance
+        out += [replace(sq, name=f"{sq.name}_low", above_pregrasp=_at_height(sq.pregrasp, low_z),
+                        above_retreat=_at_height(sq.retreat, low_z), low_above=True) for sq in list(out)]
     return out
 
 
