@@ -288,6 +288,8 @@ def _plan_frontal(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, cf
         if n_hit:
             rej.add("collides_with_object", example={**example, "box": which, "points": n_hit})
             continue
+        if _open_pads_hit(p1, p2, R, inp.xyz[:inp.n_observed], cfg, rej, "frontal", axis, pair):
+            continue
         nrm = np.array([pair.n_j, pair.n_i] if swapped else [pair.n_i, pair.n_j])
         out.append(_make_grasp("frontal", axis, pair, R, np.array([p_plus, p_minus]), nrm, inp,
                                cfg.grasp_depth, cfg.frontal_offsets_deg, center, cfg, boxes,
@@ -348,6 +350,8 @@ def _plan_top_down(inp: PlanningInput, frame: ObjectFrame, center: np.ndarray, c
         n_hit, which = _object_hits(boxes, inp.xyz, cfg)
         if n_hit:
             rej.add("collides_with_object", example={**example, "box": which, "points": n_hit})
+            continue
+        if _open_pads_hit(p1, p2, R, inp.xyz[:inp.n_observed], cfg, rej, "top_down", axis, pair):
             continue
         # the TCP goes where the pads were checked: pushed past the contacts only as far as the pads' lowest
         # corner keeps the clearance, or held back by the rise (a short box: the pushed pads, and the finger
@@ -505,6 +509,20 @@ def _near_stroke_rejected(p1: np.ndarray, p2: np.ndarray, R: np.ndarray, xyz: np
         return False
     rej.add("too_wide", example={"kind": kind, "axis": axis, "rank": pair.rank, "contacts": [p1, p2], "width": span,
                                  "why": "the object spans more than the stroke where the pads close"})
+    return True
+
+
+def _open_pads_hit(p1: np.ndarray, p2: np.ndarray, R: np.ndarray, xyz: np.ndarray, cfg: GraspPlannerConfig,
+                   rej: Rejections, kind: str, axis: str, pair: RankedPair) -> bool:
+    """Whether the pads of the hand with rotation ``R``, opened the whole stroke about the contacts' middle, meet
+    the object's seen points (``xyz``), recorded in ``rej`` as ``too_wide``: nothing the gripper opens to gets
+    them round it. A pair's own length is not the object's width along its line: a pair across a box's corner
+    region, one contact mirrored in where the view did not reach, was 9.4 cm long on a line along which the
+    seen box spanned 12 cm, and every pick of it met the box with a pad (whole MuJoCo runs)."""
+    if _open_pads_clear(R, 0.5 * (p1 + p2), xyz, cfg):
+        return False
+    rej.add("too_wide", example={"kind": kind, "axis": axis, "rank": pair.rank, "contacts": [p1, p2],
+                                 "why": "the fully open pads meet the object"})
     return True
 
 

@@ -68,6 +68,9 @@ class LayDownPoses(TurnPoses):
     lying_corners: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))  # footprint's lowest, highest
     roll_deg: float = 0.0  # a turn about the hand's approach through ``pivot`` before the tip (a pitched pick)
     roll_last: bool = False  # the roll after the tip instead (about the tipped approach)
+    #: the tip as turns (axis, degrees, in joint-space chords) about lines through ``pivot``, in order, replacing
+    #: the single tip about ``axis`` when given (``_tipped``: a turn about the vertical, then the tip)
+    arcs: list[tuple[np.ndarray, float, bool]] = field(default_factory=list)
 
     def straight_moves(self, center: np.ndarray) -> list[ChainMove]:
         """Down to the pre-grasp, approach, lift, carry, tip (in ``TIP_STEP_DEG`` chords), set down,
@@ -79,6 +82,12 @@ class LayDownPoses(TurnPoses):
         carried[:3, 3] += self.carry
         if float(np.linalg.norm(self.carry)) > 1e-6:
             moves += [ChainMove("carry", w, "held") for w in carry_line(self.lifted, carried)]
+        for axis, deg, joint in self.arcs:
+            arc = tip_arc(carried, axis, self.pivot, deg)
+            moves += [ChainMove("lay down", w, "held", joint=joint) for w in arc]
+            carried = arc[-1]
+        if self.arcs:
+            return moves + self._released()
         if self.roll_deg and not self.roll_last:
             rolled = tip_arc(carried, carried[:3, 0], self.pivot, self.roll_deg)
             moves += [ChainMove("lay down", w, "held") for w in rolled]
@@ -88,10 +97,11 @@ class LayDownPoses(TurnPoses):
         if self.roll_deg and self.roll_last:
             moves += [ChainMove("lay down", w, "held")
                       for w in tip_arc(tipped[-1], tipped[-1][:3, 0], self.pivot, self.roll_deg)]
-        moves += [ChainMove("set down", self.turned, "held"),
-                  ChainMove("retreat", self.retreat, "released"),
-                  ChainMove("up", self.above_retreat, "released")]
-        return moves
+        return moves + self._released()
+
+    def _released(self) -> list[ChainMove]:
+        return [ChainMove("set down", self.turned, "held"), ChainMove("retreat", self.retreat, "released"),
+                ChainMove("up", self.above_retreat, "released")]
 
 
 def tip_arc(start: np.ndarray, axis: np.ndarray, pivot: np.ndarray, angle_deg: float,
@@ -164,9 +174,11 @@ def lay_down_sequences(grasp: Grasp, xyz: np.ndarray, center: np.ndarray, height
                             if seq is not None:
                                 out.append(seq)
                     continue
-                seq = _tipped(grasp, poses[name] @ flip, pre @ flip, name + tag, pts, d, motion)
-                if seq is not None:
-                    out.append(seq)
+                g = poses[name] @ flip
+                for radial in (False, True):
+                    seq = _tipped(grasp, g, pre @ flip, name + tag, pts, d, motion, radial)
+                    if seq is not None:
+                        out.append(seq)
     return out
 
 
@@ -269,27 +281,40 @@ def _roll_then_tip(carried: np.ndarray, tcp: np.ndarray, x: np.ndarray) -> LeanT
 
 
 def _tipped(grasp: Grasp, g: np.ndarray, pre: np.ndarray, name: str, pts: np.ndarray, d: np.ndarray,
-            motion: TurnMotion) -> LayDownPoses | None:
+            motion: TurnMotion, radial: bool = False) -> LayDownPoses | None:
     """One lay-down chain of grasp pose ``g`` carried by ``d``, or None when its grasp line is not horizontal
-    or no tip leaves the hand above the object."""
-    axis = np.asarray(g[:3, 1], float)
-    if abs(axis[2]) > 0.2:  # the tip must turn the object's vertical axis into a horizontal one
+    or no tip leaves the hand above the object.
+
+    ``radial``: the held object is first turned about the vertical until the approach points along the line
+    from the base through the hand, then tipped about the level line across it, in joint-space chords. The
+    straight tip about the grasp line passes the wrist's singularity (joint 5 at 0) where the hand, level at
+    the pick, ends pointing down: a straight line's dense IK turns joints 4 and 6 half a turn there, past their
+    limits, and no split of the tip round the forearm reaches the end (measured on a 24 cm box carried to the
+    near ring: the end pose, pointing down, has one wrist branch within the limits, the other side of joint 5
+    from the pick's). In the arm's vertical plane the joint move crosses it with joint 5 alone."""
+    if abs(float(g[2, 1])) > 0.2:  # the tip must turn the object's vertical axis into a horizontal one
         return None
+    line = np.asarray(g[:3, 1], float)
     m = np.asarray(grasp.contacts, float).mean(axis=0)  # on the grasp line
     rel = pts - m
-    radius = float(np.max(np.linalg.norm(rel - np.outer(rel @ axis, axis), axis=1)))
+    radius = float(np.max(np.linalg.norm(rel - np.outer(rel @ line, line), axis=1)))
     lift = max(motion.lift, radius + TIP_CLEARANCE - float(m[2]))
-    best: tuple[float, float] | None = None
-    for sign in (1.0, -1.0):
-        R = rotation_about_line(axis, m, np.radians(90.0 * sign))
-        down = -float((R[:3, :3] @ g[:3, 0])[2])  # the tipped approach pointing down
-        if best is None or down > best[0]:
-            best = (down, sign)
-    assert best is not None
-    if best[0] < 0.7:  # the object would end above the hand
+    yaw_deg = 0.0
+    tip_line = line
+    if radial:
+        out = g[:2, 3] + d[:2]  # where the hand will be when it tips: the line from the base through it
+        yaw_deg = float(np.degrees(np.arctan2(out[1], out[0]) - np.arctan2(g[1, 0], g[0, 0])))
+        yaw_deg = (yaw_deg + 180.0) % 360.0 - 180.0
+        tip_line = np.array([-out[1], out[0], 0.0]) / max(float(np.linalg.norm(out)), 1e-9)
+    Y = rotation_about_line(np.array([0.0, 0.0, 1.0]), m, np.radians(yaw_deg))
+
+    def whole(sign: float) -> np.ndarray:
+        return rotation_about_line(tip_line, m, np.radians(sign * 90.0)) @ Y
+
+    sign = max((1.0, -1.0), key=lambda sg: -float((whole(sg)[:3, :3] @ g[:3, 0])[2]))
+    R = whole(sign)
+    if -float((R[:3, :3] @ g[:3, 0])[2]) < 0.7:  # the object would end above the hand
         return None
-    angle = 90.0 * best[1]
-    R = rotation_about_line(axis, m, np.radians(angle))
     moved = pts @ R[:3, :3].T + R[:3, 3] + d  # where the object is when tipped on the table, carried by d
     drop = float(moved[:, 2].min()) - RELEASE_GAP
     lowered = R @ g
@@ -303,15 +328,18 @@ def _tipped(grasp: Grasp, g: np.ndarray, pre: np.ndarray, name: str, pts: np.nda
     retreat[:3, 3] -= back * lowered[:3, 0]
     rest = moved - np.array([0.0, 0.0, drop + RELEASE_GAP])
     above = retreat.copy()  # clear of the object as it now lies: the next moves are joint motions
-    above[2, 3] = max(above[2, 3], float(rest[:, 2].max()) + motion.clearance)
+    if not radial:  # pointing down on the near ring the hand reaches no higher than the retreat (about 0.14 m);
+        # backed off along its approach as far as the pre-grasp stood, its open pads are clear of the top already
+        above[2, 3] = max(above[2, 3], float(rest[:, 2].max()) + motion.clearance)
     above_pre = pre.copy()  # clear of the standing object
     above_pre[2, 3] = max(above_pre[2, 3], float(pts[:, 2].max()) + motion.clearance)
     lo, hi = rest[:, :2].min(axis=0), rest[:, :2].max(axis=0)
-    tag = "" if float(np.linalg.norm(d)) < 1e-6 else f"@{d[0]:+.2f},{d[1]:+.2f}"
+    arcs = [(np.array([0.0, 0.0, 1.0]), yaw_deg, False), (tip_line, 90.0 * sign, True)] if radial else []
+    tag = ("_radial" if radial else "") + ("" if float(np.linalg.norm(d)) < 1e-6 else f"@{d[0]:+.2f},{d[1]:+.2f}")
     return LayDownPoses(name=f"{name}_lay_down{tag}", above_pregrasp=above_pre, pregrasp=pre, grasp=g.copy(),
                         lifted=lifted, turned_lifted=tipped_lifted, turned=lowered, retreat=retreat,
-                        above_retreat=above, direction=LAY_DOWN, carry=d.copy(), axis=axis.copy(),
-                        pivot=m + d + np.array([0.0, 0.0, lift]), tip_deg=angle,
+                        above_retreat=above, direction=LAY_DOWN, carry=d.copy(), axis=tip_line.copy(),
+                        pivot=m + d + np.array([0.0, 0.0, lift]), tip_deg=90.0 * sign, arcs=arcs,
                         lying_center=np.array([*(0.5 * (lo + hi)), 0.0]), lying_height=float(rest[:, 2].max()),
                         lying_corners=np.array([[lo[0], lo[1], 0.0], [hi[0], hi[1], 0.0]]))
 

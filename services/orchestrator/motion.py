@@ -21,7 +21,7 @@ from services.grasp.pitch import pitched
 from services.orchestrator.cell import Cell
 from services.orchestrator.config import TurnMotion
 from services.orchestrator.limits import ARM_UNAVAILABLE_CODES
-from services.orchestrator.planning import TurnPoses
+from services.orchestrator.planning import ChainMove, TurnPoses
 from services.orchestrator.regrasp import relocation_shift
 
 #: m the gripper opens at most before a grasp (its stroke is 0.106 m).
@@ -45,6 +45,27 @@ def pick_opening(width: float, margin: float, is_pitched: bool) -> float:
         return STROKE
     opening = width + margin
     return min(FULL_OPENING, max(opening, PITCHED_OPENING) if is_pitched else opening)
+
+
+#: rad: the most any joint may turn in one joint-space chord of a held arc (``ChainMove.joint``). A 10-degree chord
+#: through the wrist's singularity turns joint 5 by about 0.5 rad; more means the IK answered another branch
+#: and the held object would swing.
+MAX_CHORD_JOINT_STEP = 0.7
+
+
+def move_kind(mv: ChainMove) -> str:
+    """The arm's move kind for one move of a chain: a joint-space move or a straight line."""
+    return "pose" if mv.joint else "linear"
+
+
+def check_chord(mv: ChainMove, q_from: np.ndarray, q_to: np.ndarray) -> None:
+    """Refuse a joint-space chord whose IK answer is another branch (``MAX_CHORD_JOINT_STEP``)."""
+    if not mv.joint:
+        return
+    step = float(np.max(np.abs(np.asarray(q_to, float) - np.asarray(q_from, float))))
+    if step > MAX_CHORD_JOINT_STEP:
+        raise RemoteError(f"{mv.step}: a joint-space chord would turn a joint {step:.2f} rad (another IK branch)",
+                          code="line_discontinuous")
 
 
 class GraspFailed(ObjscanError):
@@ -107,9 +128,11 @@ class ArmMotion:
                     q = cand
                     for mv in seq.straight_moves(center):
                         step = mv.step
-                        q = (await self.cell.move("linear", target=mv.target, q=q, speed=m.approach_speed_scale,
-                                                  contact=mv.contact, dry_run=True,
-                                                  check_opening=held_opening if mv.phase == "held" else None)).q
+                        q_next = (await self.cell.move(move_kind(mv), target=mv.target, q=q,
+                                                       speed=m.approach_speed_scale, contact=mv.contact, dry_run=True,
+                                                       check_opening=held_opening if mv.phase == "held" else None)).q
+                        check_chord(mv, q, q_next)
+                        q = q_next
                     return np.asarray(cand, float)
                 except RemoteError as exc:
                     if exc.code in ARM_UNAVAILABLE_CODES:
@@ -172,7 +195,9 @@ class ArmMotion:
         up[2, 3] = max(up[2, 3], safe_z)
         back_up = back.copy()
         back_up[2, 3] = max(back_up[2, 3], safe_z)
-        for route in ((back, back_up), (up,)):
+        up_low = T.copy()  # clear of the top by less, where the hand pointing down reaches no higher (TurnMotion)
+        up_low[2, 3] = max(up_low[2, 3], height + m.low_clearance)
+        for route in ((back, back_up), (up,), (up_low,)):
             try:
                 for target in route:
                     await self.short_move(target, m.approach_speed_scale, joint_fallback=True)
@@ -226,7 +251,11 @@ class ArmMotion:
             for mv in held_moves:
                 # the turn follows the arc in 5-degree chords, each a straight line continuing the branch
                 self.step = f"{mv.step} (holding)"
-                await c.move("linear", target=mv.target, speed=m.approach_speed_scale, contact=True)
+                if mv.joint:  # the IK's answer from here is checked again before the arm follows it
+                    q_now = np.asarray((await c.state()).position, float)
+                    check_chord(mv, q_now, (await c.move("pose", target=mv.target, q=q_now, contact=True,
+                                                         dry_run=True)).q)
+                await c.move(move_kind(mv), target=mv.target, speed=m.approach_speed_scale, contact=True)
         except RemoteError:
             await self.set_down_here(m.lift)
             await c.gripper(opening, m.gripper_force)

@@ -93,6 +93,10 @@ class ChainMove:
     target: np.ndarray
     phase: str  # approach (gripper open, before closing) | held | released
     contact: bool = True
+    #: a joint-space move to ``target`` (the IK nearest the configuration before it) instead of a straight line:
+    #: a short chord of an arc that passes the wrist's singularity (joint 5 at 0), where a straight line's dense
+    #: IK turns joints 4 and 6 half a turn; a joint move passes it with joint 5 alone (``lay_down._tipped``)
+    joint: bool = False
 
 
 def _lift(T: np.ndarray, dz: float) -> np.ndarray:
