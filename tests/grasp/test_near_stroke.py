@@ -147,3 +147,32 @@ def test_a_near_stroke_pair_from_an_edge_keeps_its_two_points():
     square[0] = [0.0, 1.0, 0.0]
     p1, p2 = near_stroke_contacts(xyz, square, 0, 1, UP, STROKE, 0.005)
     assert p1[2] == pytest.approx(p2[2])  # two faces: levelled
+
+
+@pytest.mark.parametrize("line_deg", [0.0, 25.0, 40.0])
+def test_a_pair_whose_open_pads_meet_the_box_is_too_wide(line_deg):
+    """The 9.9 x 14.3 cm box seen from the arm's side, a top-down pair through its middle: across its 9.9 cm
+    (``line_deg`` 0) the pads opened the whole stroke clear it; along a line turned 25 or 40 degrees the seen box
+    spans 10.9 or 12.9 cm between where the pads stand, and they meet it, however short the pair (9.4 cm, one
+    contact where the view did not reach, in a whole run), so the pair is rejected as too wide."""
+    from services.grasp.planner import Rejections, _open_pads_hit
+    from services.grasp.poses import top_down_rotation
+
+    size = (NEAR_STROKE_BOX[1], NEAR_STROKE_BOX[0], NEAR_STROKE_BOX[2])  # 9.9 cm along the line from the base
+    xyz, _ = S.box(size, 12000, xy=CENTER, view_from=_cams(), noise=0.001, seed=0)
+    a = np.radians(line_deg)
+    half = 0.5 * 0.094 * np.array([np.cos(a), np.sin(a), 0.0])
+    mid = np.array([*CENTER, 0.08])
+    p1, p2 = mid + half, mid - half
+    cfg = GraspPlannerConfig(mode="top_down")
+    R, _ = top_down_rotation(p1, p2, UP, np.asarray(cfg.approach_origin, float))
+    rej = Rejections()
+    hit = _open_pads_hit(p1, p2, R, xyz, cfg, rej, "top_down", "y", _Pair())
+    assert hit == (line_deg > 0.0)
+    assert ("too_wide" in rej) == hit
+
+
+class _Pair:
+    """What a rejection records of a ranked pair."""
+
+    rank = 9.0

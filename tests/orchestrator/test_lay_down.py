@@ -54,7 +54,8 @@ def test_a_tall_box_is_tall_and_its_lay_down_tips_it_onto_its_side():
     grasp = Grasp(kind="frontal", contacts=np.array([[0.587, 0.0545, 0.119], [0.587, -0.0545, 0.119]]),
                   width=0.109, poses={"grasp": Pose.from_matrix(g), "pregrasp": Pose.from_matrix(pre)})
     seqs = lay_down_sequences(grasp, view.cloud.xyz, view.center, view.height, TurnMotion(), [np.zeros(3)])
-    assert [s.name for s in seqs] == ["grasp_lay_down", "grasp_rolled_lay_down"]  # and with the pads swapped
+    assert [s.name for s in seqs] == ["grasp_lay_down", "grasp_lay_down_radial",  # and with the pads swapped
+                                      "grasp_rolled_lay_down", "grasp_rolled_lay_down_radial"]
     pts = whole_object(view.cloud.xyz, view.center)
     for seq in seqs:
         assert seq.direction == LAY_DOWN
@@ -66,7 +67,52 @@ def test_a_tall_box_is_tall_and_its_lay_down_tips_it_onto_its_side():
                 assert float((pts @ held[:3, :3].T + held[:3, 3])[:, 2].min()) > -1e-6, mv.step
         rest = seq.turned @ np.linalg.inv(seq.grasp)
         assert float((pts @ rest[:3, :3].T + rest[:3, 3])[:, 2].min()) == pytest.approx(0.004, abs=1e-6)
-        assert seq.straight_moves(view.center)[-1].target[2, 3] >= seq.lying_height + 0.05  # backs off up
+        last = seq.straight_moves(view.center)[-1].target[2, 3]
+        if seq.arcs:  # backed off along its approach, as far as the pre-grasp stood: no higher (near ring's reach)
+            assert last == pytest.approx(seq.retreat[2, 3]) and last > seq.lying_height
+        else:
+            assert last >= seq.lying_height + 0.05  # backs off up
+
+
+def test_a_tall_box_picked_across_its_thin_side_is_tipped_through_the_wrist_singularity(kin):
+    """The 23.8 cm box turned with its 10.9 cm along the line from the base (the frontal pick across its 6.6 cm
+    reaches it at 0.60 m): tipped straight about the grasp line on the near ring, the hand's approach passes the
+    forearm's axis (joint 5 at 0) and a straight line's joints 4 and 6 run past their limits; the end, pointing
+    down, has one wrist branch within the limits, on the other side of joint 5. Turned first until the approach
+    points along the line from the base and tipped in joint-space chords, the lay-down is executable in full,
+    and the box lies on its 6.6 cm side, 10.9 cm tall, on the near ring."""
+    from tests.orchestrator.test_turn_reach import _executable
+
+    size = (TALL_BOX[1], TALL_BOX[0], TALL_BOX[2])
+    view = _view(size, WORKSPACE, 0)
+    plan = plan_grasps(view.cloud.xyz, view.cloud.normals, table_plane(),
+                       replace(GraspService.planner_config(), mode="frontal"))
+    assert plan.grasps, plan.explain()
+    seqs = [s for g in plan.to_messages() for s in lay_down_sequences(
+        g, view.cloud.xyz, view.center, view.height, TurnMotion(), carry_shifts(view.center, RelocationConfig()))]
+    assert not any(_executable(kin, s) for s in seqs if not s.arcs)
+    done = [s for s in seqs if s.arcs and _executable(kin, s)]
+    assert done, [s.name for s in seqs]
+    for seq in done:
+        assert "_radial@" in seq.name and any(mv.joint for mv in seq.straight_moves(view.center))
+        assert size[0] < seq.lying_height < size[0] + 0.015  # its 10.9 cm up (the far side a mirrored estimate)
+        assert np.hypot(*seq.lying_center[:2]) == pytest.approx(RelocationConfig().near_radius, abs=0.02)
+
+
+def test_a_joint_space_chord_answered_on_another_branch_is_refused():
+    """A held chord whose IK answer turns a joint more than a 10-degree chord through the singularity can (the
+    answer is another branch: the held object would swing) is refused as the straight line's jump is."""
+    from common.errors import RemoteError
+    from services.orchestrator.motion import MAX_CHORD_JOINT_STEP, check_chord
+    from services.orchestrator.planning import ChainMove
+
+    q = np.zeros(6)
+    chord = ChainMove("lay down", np.eye(4), "held", joint=True)
+    check_chord(chord, q, q + [0, 0, 0, 0, 0.5, 0])  # joint 5 across its zero: fine
+    with pytest.raises(RemoteError) as err:
+        check_chord(chord, q, q + [0, 0, 0, MAX_CHORD_JOINT_STEP + 0.1, 0.5, 0])
+    assert err.value.code == "line_discontinuous"
+    check_chord(ChainMove("lay down", np.eye(4), "held"), q, q + 3.0)  # a straight line is the arm's to check
 
 
 def _standing_tall_box(kin, tmp_path, rescans: int, size: tuple[float, float, float] = TALL_BOX):  # noqa: ANN001

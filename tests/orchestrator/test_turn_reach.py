@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from common.api import GraspPlanReply, ViewResult
+from common.errors import RemoteError
 from common.messages import PointCloud
 from services.arm.errors import IKError, TrajectoryError
 from services.arm.kinematics import Kinematics, wrist_flip
@@ -22,6 +23,7 @@ from services.grasp.planner import plan_grasps
 from services.grasp.service import GraspService
 from services.orchestrator.config import AcquisitionConfig, TurnMotion
 from services.orchestrator.machine import Acquisition, State
+from services.orchestrator.motion import check_chord
 from services.orchestrator.planning import TurnPoses, turn_sequences
 from services.session_store import SessionStore
 from tests.grasp.shapes import box, table_plane
@@ -47,7 +49,8 @@ def _plan(mode: str, yaw_deg: float = 0.0):  # noqa: ANN202
 
 def _executable(kin: Kinematics, seq: TurnPoses) -> bool:
     """Kinematically: from the IK branch nearest home (or its other wrist branch) at above_pregrasp, every
-    later straight move has a continuous joint path inside the limits, the TCP above the table."""
+    later straight move has a continuous joint path inside the limits, the TCP above the table; a joint-space
+    chord (``ChainMove.joint``) has an IK answer near the configuration before it (``motion.check_chord``)."""
     try:
         q_a = kin.ik(seq.above_pregrasp, HOME).q
     except IKError:
@@ -57,11 +60,15 @@ def _executable(kin: Kinematics, seq: TurnPoses) -> bool:
             continue
         try:
             for mv in seq.straight_moves(CENTER):
-                Q = cartesian_line_path(kin, q, mv.target)
+                if mv.joint:
+                    Q = np.array([q, kin.ik(mv.target, q).q])
+                    check_chord(mv, Q[0], Q[1])
+                else:
+                    Q = cartesian_line_path(kin, q, mv.target)
                 assert min(kin.fk(p)[2, 3] for p in Q) >= MIN_TCP_Z
                 q = Q[-1]
             return True
-        except TrajectoryError:
+        except (TrajectoryError, IKError, RemoteError):
             continue
     return False
 
@@ -87,6 +94,30 @@ def test_top_down_grasps_reach_the_object_at_0_60_m_tilted_toward_the_base(kin):
     assert not _executable(kin, next(s for s in seqs if s.name == "grasp"))
     assert seqs[0].name == "grasp_minus45"
     assert _executable(kin, seqs[0])
+
+
+NEAR_STROKE_BOX = (0.099, 0.143, 0.109)  # m: 9.9 cm along the line from the base, 14.3 across, 10.9 tall
+
+
+def test_a_top_down_turn_on_the_near_ring_reaches_by_its_low_chains(kin):
+    """A 10.9 cm box on the near ring (0.40 m), its only grasp across its 9.9 cm along the line from the base:
+    straight down the hand reaches no higher than about 0.17 m there, so no chain with its joint-space moves
+    8 cm above the box (0.19 m) is executable, either way round. The same chains 4 cm above it are, both ways,
+    and they come after every other chain."""
+    center = np.array([0.40, 0.0])
+    cams = [np.array([*center, 0.0]) + 0.38 * np.array([-np.cos(np.radians(a)), np.sin(np.radians(a)), 0.0])
+            + [0, 0, 0.3] for a in (-22.0, 0.0, 22.0)]
+    xyz, normals = box(NEAR_STROKE_BOX, n=12000, xy=center, view_from=cams)
+    plan = plan_grasps(xyz, normals, table_plane(), replace(GraspService.planner_config(), mode="top_down"))
+    assert plan.grasps, plan.explain()
+    seqs = turn_sequences(plan.to_messages()[0], TurnMotion(), NEAR_STROKE_BOX[2])
+    high = [s for s in seqs if not s.low_above]
+    low = [s for s in seqs if s.low_above]
+    assert len(low) == len(high) and seqs[len(high):] == low
+    assert all(s.above_pregrasp[2, 3] == pytest.approx(max(NEAR_STROKE_BOX[2] + 0.04, s.pregrasp[2, 3])) for s in low)
+    assert not any(_executable(kin, s) for s in high)
+    for direction in (1, -1):
+        assert any(_executable(kin, s) for s in low if s.direction == direction), direction
 
 
 @pytest.fixture(scope="module")
