@@ -151,6 +151,10 @@ def turn_sequences(grasp: Grasp, motion: TurnMotion, object_height: float,
     points' (x, y), and the gripper's opening for this grasp), a pre-grasp whose open fingers the
     object's box would hold stands back until they are clear of it (``clear_pregrasp``, the box's margin
     ``motion.object_box_margin``).
+
+    A top-down grasp's chains come a second time with ``above_*`` at ``motion.low_clearance`` (``low_above``,
+    names ending ``_low``), for where the hand pointing down does not reach ``clearance`` above the object (the
+    near ring); the state machine tries them after every other chain.
     """
     safe_z = object_height + motion.clearance
     poses = {name: p.matrix() for name, p in grasp.poses.items()}
