@@ -154,7 +154,8 @@ def test_a_pair_whose_open_pads_meet_the_box_is_too_wide(line_deg):
     """The 9.9 x 14.3 cm box seen from the arm's side, a top-down pair through its middle: across its 9.9 cm
     (``line_deg`` 0) the pads opened the whole stroke clear it; along a line turned 25 or 40 degrees the seen box
     spans 10.9 or 12.9 cm between where the pads stand, and they meet it, however short the pair (9.4 cm, one
-    contact where the view did not reach, in a whole run), so the pair is rejected as too wide."""
+    contact where the view did not reach, in a whole run), so the pair is rejected as too wide. A pair on an edge
+    is not: closing on it turns the box until its faces lie on the pads."""
     from services.grasp.planner import Rejections, _open_pads_hit
     from services.grasp.poses import top_down_rotation
 
@@ -166,13 +167,21 @@ def test_a_pair_whose_open_pads_meet_the_box_is_too_wide(line_deg):
     p1, p2 = mid + half, mid - half
     cfg = GraspPlannerConfig(mode="top_down")
     R, _ = top_down_rotation(p1, p2, UP, np.asarray(cfg.approach_origin, float))
+    line = (p1 - p2) / np.linalg.norm(p1 - p2)
+    square, edge = _Pair(line, -line), _Pair(line, np.array([-line[1], line[0], 0.0]))
     rej = Rejections()
-    hit = _open_pads_hit(p1, p2, R, xyz, cfg, rej, "top_down", "y", _Pair())
+    hit = _open_pads_hit(p1, p2, R, xyz, cfg, rej, "top_down", "y", square)
     assert hit == (line_deg > 0.0)
     assert ("too_wide" in rej) == hit
+    # a pair closing on an edge is left to turn the box in the hand
+    assert not _open_pads_hit(p1, p2, R, xyz, cfg, Rejections(), "top_down", "y", edge)
 
 
 class _Pair:
-    """What a rejection records of a ranked pair."""
+    """What the test reads of a ranked pair: its contact normals (one face mirrored in where the view did not
+    reach carries the mirror of the seen one's: both along the line) and its rank."""
 
     rank = 9.0
+
+    def __init__(self, n_i: np.ndarray, n_j: np.ndarray):
+        self.n_i, self.n_j = n_i, n_j
