@@ -68,10 +68,11 @@ async def try_lay_down(acq: Acquisition, k: int, view: ViewResult, box: tuple[np
     scannable: dict[tuple, bool] = {}
     checks = lower_only = 0
     for d in carry_shifts(view.center, rc):
-        # pitched picks first: they lean away from the base, which the arm reaches wherever it can pick at all
+        # pitched picks first: they lean away from the base, which the arm reaches wherever it can pick at all;
+        # the tips through the wrist's singularity (joint-space chords) last
         chains = sorted(((gi, seq) for gi in order for seq in lay_down_sequences(
             plan.grasps[gi], view.cloud.xyz, view.center, view.height, acq.config.turn, [d])),
-            key=lambda c: not pitched(c[1].name))
+            key=lambda c: (not pitched(c[1].name), bool(c[1].arcs)))
         for gi, seq in chains:
             if checks >= rc.max_checks:
                 break

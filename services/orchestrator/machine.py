@@ -628,6 +628,7 @@ class Acquisition:
             # farther than the near ring: bring it in first; on the ring, top-down turns reach every yaw there
             # (measured), so it moves again only once those have been tried too
             direct = moved + direct if far else direct + moved if self.j.grasp_mode == "top_down" else direct
+            direct.sort(key=lambda c: c[2].low_above)  # the lowered ones after every other, relocated or not
             self.decide("yaw-tied grasps: relocated set-downs tried " + ("first" if far else "after direct ones"
                                                                         if self.j.grasp_mode == "top_down" else
                                                                         "after the top-down ones"),
@@ -640,7 +641,8 @@ class Acquisition:
                     break
                 self.decide("trying relocated set-downs", chains=len(late),
                             spots=[np.round(d[:2], 3).tolist() for d in shifts])
-                direct = [(gi, g, relocated(sq, d)) for d in shifts for gi, g, sq in late]  # nearest spot first
+                direct = sorted(((gi, g, relocated(sq, d)) for d in shifts for gi, g, sq in late),  # nearest first
+                                key=lambda c: c[2].low_above)
             for gi, grasp, seq in direct:
                 signature = f"{grasp.kind}:{gi}:{seq.name}"
                 relocating = seq.carry_from is not None
