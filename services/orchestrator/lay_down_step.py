@@ -66,31 +66,33 @@ async def try_lay_down(acq: Acquisition, k: int, view: ViewResult, box: tuple[np
     acq.decide("laying the object on its side: no grasp turns it standing", height=round(view.height, 4),
                grasps=len(plan.grasps))
     scannable: dict[tuple, bool] = {}
-    checks = lower_only = 0
-    for d in carry_shifts(view.center, rc):
-        # pitched picks first: they lean away from the base, which the arm reaches wherever it can pick at all;
-        # the tips through the wrist's singularity (joint-space chords) last
-        chains = sorted(((gi, seq) for gi in order for seq in lay_down_sequences(
-            plan.grasps[gi], view.cloud.xyz, view.center, view.height, acq.config.turn, [d])),
-            key=lambda c: (not pitched(c[1].name), bool(c[1].arcs)))
-        for gi, seq in chains:
-            if checks >= rc.max_checks:
-                break
-            if seq.lying_height >= view.height:  # lying no lower than it stands: nothing gained
-                lower_only += 1
-                continue
-            grasp = plan.grasps[gi]
-            if not await acq._scannable_spot(seq.lying_center, seq.lying_height, scannable):
-                continue
-            checks += 1
-            acq.j.counters.grasp_checks += 1
-            q_start = await acq._dry_run(k, seq, view.center, float(grasp.width), failures)
-            if q_start is None:
-                continue
-            outcome = await _execute(acq, k, gi, seq, q_start, box, failures, grasp)
-            if outcome is not None:
-                return outcome
-    acq.decide("no lay-down executable", checks=checks, not_lower=lower_only)
+    checks = [0, 0]  # dry runs of straight tips, of tips through the wrist's singularity: each its own budget
+    lower_only = 0
+    # per carry, pitched picks first: they lean away from the base, which the arm reaches wherever it can pick at
+    # all; the tips through the wrist's singularity (joint-space chords, on the near ring) after every other
+    chains = sorted(((di, gi, seq) for di, d in enumerate(carry_shifts(view.center, rc)) for gi in order
+                     for seq in lay_down_sequences(plan.grasps[gi], view.cloud.xyz, view.center, view.height,
+                                                   acq.config.turn, [d])),
+                    key=lambda c: (bool(c[2].arcs), c[0], not pitched(c[2].name)))
+    for _, gi, seq in chains:
+        budget = int(bool(seq.arcs))
+        if checks[budget] >= rc.max_checks:
+            continue
+        if seq.lying_height >= view.height:  # lying no lower than it stands: nothing gained
+            lower_only += 1
+            continue
+        grasp = plan.grasps[gi]
+        if not await acq._scannable_spot(seq.lying_center, seq.lying_height, scannable):
+            continue
+        checks[budget] += 1
+        acq.j.counters.grasp_checks += 1
+        q_start = await acq._dry_run(k, seq, view.center, float(grasp.width), failures)
+        if q_start is None:
+            continue
+        outcome = await _execute(acq, k, gi, seq, q_start, box, failures, grasp)
+        if outcome is not None:
+            return outcome
+    acq.decide("no lay-down executable", checks=sum(checks), not_lower=lower_only)
     return None
 
 
