@@ -145,3 +145,23 @@ def test_turn_is_checked_in_full_before_the_hand_moves(kin, tmp_path):
     assert [m for m in executed if m["error"]] == []
     assert any(m["holding"] for m in executed)
     assert acq.j.counters.grasp_attempts == 1
+
+
+def test_the_escape_after_a_low_chain_stays_low_where_the_hand_reaches_no_higher(kin):
+    """After a low chain on the near ring the hand points down 4 cm above the 10.9 cm box: 8 cm above it, and 9 cm
+    back along the approach, are out of the wrist's reach there, so the escape before the next attempt ends 4 cm
+    above it, where it already is, instead of going home through the object's box."""
+    from services.orchestrator.motion import ArmMotion
+
+    center, height = np.array([0.40, 0.0, 0.0]), NEAR_STROKE_BOX[2]
+    T = np.eye(4)
+    T[:3, :3] = [[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [-1.0, 0.0, 0.0]]  # x (the approach) down, y radial
+    T[:3, 3] = [0.40, 0.0, height + TurnMotion().low_clearance]
+    q = kin.ik(T, HOME).q
+    cell = ArmOnlyCell(q, kin)
+    decisions: list[str] = []
+    motion = ArmMotion(cell, TurnMotion(), lambda what, **_: decisions.append(what), lambda *a, **k: None,
+                       lambda seq: None)
+    asyncio.run(motion.escape(center, height))
+    assert "escaping through the object box to home" not in decisions, decisions
+    assert np.allclose(cell.arm.state()["T_base_gripper"][:3, 3], T[:3, 3], atol=1e-3)
