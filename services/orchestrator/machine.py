@@ -627,9 +627,16 @@ class Acquisition:
             far = float(np.hypot(*view.center[:2])) > cfg.turn.relocation.near_radius + cfg.turn.relocation.min_shift
             # farther than the near ring: bring it in first; on the ring, top-down turns reach every yaw there
             # (measured), so it moves again only once those have been tried too
-            direct = moved + direct if far else direct + moved if self.j.grasp_mode == "top_down" else direct
+            # on the ring but off its spot (each turn about the estimated centre leaves it a centimetre or so
+            # off, and a lying 24 cm box drifted 4 cm in eight turns, past the wrist's reach), the turn sets it
+            # back on the spot first
+            off_spot = not far and float(np.linalg.norm(shifts[0])) < cfg.turn.relocation.reposition_drift
+            back, rest = (moved[:len(direct)], moved[len(direct):]) if off_spot else ([], moved)  # to shifts[0]
+            direct = moved + direct if far else back + direct + rest if self.j.grasp_mode == "top_down" \
+                else back + direct
             direct.sort(key=lambda c: c[2].low_above)  # the lowered ones after every other, relocated or not
-            self.decide("yaw-tied grasps: relocated set-downs tried " + ("first" if far else "after direct ones"
+            self.decide("yaw-tied grasps: relocated set-downs tried " + ("first" if far else "back on the spot first"
+                                                                        if back else "after direct ones"
                                                                         if self.j.grasp_mode == "top_down" else
                                                                         "after the top-down ones"),
                         chains=len(direct), spots=[np.round(view.center[:2] + d[:2], 3).tolist() for d in shifts])
