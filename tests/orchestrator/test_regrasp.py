@@ -5,6 +5,7 @@ the same turn set down at another spot can. Real grasp planner, real arm kinemat
 from __future__ import annotations
 
 import asyncio
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -152,3 +153,32 @@ def test_a_relocated_set_down_never_leaves_the_object_where_it_cannot_be_scanned
         assert asyncio.run(acq._reachable_scan_set(2)), acq.j.centers.get("2")
     else:  # nothing safe here: the machine moves on to the next strategy instead
         assert nxt == State.PLAN_GRASP and acq.j.grasp_mode == "top_down"
+
+
+def test_a_turn_on_the_near_ring_sets_a_drifted_box_back_on_its_spot(kin, tmp_path):
+    """A 9.9 x 14.3 x 10.9 cm box (held only across its 9.9 cm) on the near ring, 3.5 cm off its spot (0.40, 0):
+    each turn about the estimated centre leaves an object a centimetre or so off, and a lying 24 cm box drifted 4
+    cm in eight turns, past the wrist's reach. The turn sets it down back on the spot (the relocated set-down is
+    tried first), and the journal says so."""
+    size = reach.NEAR_STROKE_BOX
+    center = np.array([0.40, 0.035, 0.0])
+    cams = [center + 0.38 * np.array([-np.cos(np.radians(a)), np.sin(np.radians(a)), 0.0]) + [0, 0, 0.3]
+            for a in (-22.0, 0.0, 22.0)]
+    xyz, normals = box(size, n=12000, xy=center[:2], yaw_deg=90.0, view_from=cams)
+    plan = plan_grasps(xyz, normals, table_plane(), replace(GraspService.planner_config(), mode="top_down"))
+    assert plan.grasps and yaw_tied(plan.to_messages()), plan.explain()
+    store = SessionStore(tmp_path)
+    store.save_view(ViewResult(view=1, cloud=PointCloud(xyz=xyz.astype(np.float32), normals=normals.astype(np.float32)),
+                               table=table_plane(), center=center.copy(), height=size[2],
+                               scan_poses=np.zeros((0, 4, 4))))
+    cell = ArmOnlyCell(np.asarray(SimArmDriver(send=lambda q, o: None).config.initial_q, float), kin)
+    acq = Acquisition(cell, store, AcquisitionConfig(views=3))  # type: ignore[arg-type]
+    acq.j.update(view=1, state="turn", turns_deg=[0.0, 30.0], turn_direction=1, grasp_mode="top_down",
+                 centers={"1": center.tolist()}, heights={"1": size[2]})
+    acq._plan = GraspPlanReply(grasps=plan.to_messages(), rejections={}, explanation=plan.explain(), seconds=0.0)
+    assert asyncio.run(acq.turn()) == State.SCAN, [d for d in acq.j.decisions if "not executable" not in d["what"]]
+    assert any(d["what"] == "yaw-tied grasps: relocated set-downs tried back on the spot first"
+               for d in acq.j.decisions)
+    turned = next(d for d in acq.j.decisions if d["what"] == "turned")
+    assert turned["relocated"] == [0.0, -0.035]
+    np.testing.assert_allclose(acq.j.centers["2"][:2], [0.40, 0.0], atol=1e-3)
