@@ -516,14 +516,14 @@ def _open_pads_hit(p1: np.ndarray, p2: np.ndarray, R: np.ndarray, xyz: np.ndarra
                    rej: Rejections, kind: str, axis: str, pair: RankedPair) -> bool:
     """Whether the pads of the hand with rotation ``R``, opened the whole stroke about the contacts' middle, meet
     the object's seen points (``xyz``), recorded in ``rej`` as ``too_wide``: nothing the gripper opens to gets
-    them round it. A pair's own length is not the object's width along its line: a pair across a box's corner
-    region, one contact mirrored in where the view did not reach, was 9.4 cm long on a line along which the
-    seen box spanned 12 cm, and every pick of it met the box with a pad (whole MuJoCo runs).
+    them round it. A pair's own length is not the object's width along its line: on a 9.9 x 14.3 cm box a 9.4 cm
+    pair, one contact mirrored in where the view did not reach, had the seen box 2-4 mm past where its fully open
+    pads stand, and every pick of it met the box with a pad (three in a whole MuJoCo run).
 
     A pair on an edge (a contact normal more than 30 degrees off the line, ``near_stroke.square_to_faces``) is
     not tested: closing on the edge turns the box in the hand until its faces lie on the pads, and the open pads'
     reach past the seen corner is that turn (a 9.96 cm edge pair on a 6.9 x 9.3 cm box was held and turned in
-    MuJoCo runs, its open pads 7 mm past the seen corner)."""
+    MuJoCo runs; on views of that box such edge pairs' open pads stand 7-8 mm inside the seen corner)."""
     if not square_to_faces(np.array([pair.n_i, pair.n_j]), 0, 1, p1 - p2) or \
             _open_pads_clear(R, 0.5 * (p1 + p2), xyz, cfg):
         return False
