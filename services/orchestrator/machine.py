@@ -520,7 +520,7 @@ class Acquisition:
             grasp = self._plan.grasps[gi]
             clear = (box, footprint, pick_opening(grasp.width, cfg.turn.open_margin, False))
             sequences = sorted(turn_sequences(grasp, cfg.turn, height, clear),
-                               key=lambda sq: (fixed is not None and sq.direction != fixed, sq.low_above,
+                               key=lambda sq: (fixed is not None and sq.direction != fixed,
                                                abs(offsets[gi] + sq.direction * cfg.turn_deg)))
             out += [(gi, grasp, sq) for sq in sequences if fixed is None or sq.direction == fixed]
         return sorted(out, key=lambda c: c[2].low_above)  # the lowered ones after every other grasp's

@@ -52,9 +52,7 @@ def test_bad_relocation_config_is_a_clear_error():
 
 
 def _plan(yaw_deg: float, center: np.ndarray = CENTER):  # noqa: ANN202
-    cams = [center + 0.38 * np.array([-np.cos(np.radians(a)), np.sin(np.radians(a)), 0.0]) + [0, 0, 0.3]
-            for a in (-22.0, 0.0, 22.0)]
-    xyz, normals = box(CREAM_CHEESE, n=12000, xy=center[:2], yaw_deg=yaw_deg, view_from=cams)
+    xyz, normals = box(CREAM_CHEESE, n=12000, xy=center[:2], yaw_deg=yaw_deg, view_from=reach._cameras(center))
     return xyz, normals, plan_grasps(xyz, normals, table_plane(), GraspService.planner_config())
 
 
@@ -162,9 +160,7 @@ def test_a_turn_on_the_near_ring_sets_a_drifted_box_back_on_its_spot(kin, tmp_pa
     tried first), and the journal says so."""
     size = reach.NEAR_STROKE_BOX
     center = np.array([0.40, 0.035, 0.0])
-    cams = [center + 0.38 * np.array([-np.cos(np.radians(a)), np.sin(np.radians(a)), 0.0]) + [0, 0, 0.3]
-            for a in (-22.0, 0.0, 22.0)]
-    xyz, normals = box(size, n=12000, xy=center[:2], yaw_deg=90.0, view_from=cams)
+    xyz, normals = box(size, n=12000, xy=center[:2], yaw_deg=90.0, view_from=reach._cameras(center))
     plan = plan_grasps(xyz, normals, table_plane(), replace(GraspService.planner_config(), mode="top_down"))
     assert plan.grasps and yaw_tied(plan.to_messages()), plan.explain()
     store = SessionStore(tmp_path)

@@ -35,9 +35,10 @@ HOME = np.array([0.0, -0.3, -0.9, 0.0, 1.2, 0.0])
 MIN_TCP_Z = 0.01  # services/arm/safety.py
 
 
-def _cameras() -> list[np.ndarray]:
-    """Three wrist-camera positions on the arm's side of the object, as the scan poses place them."""
-    return [CENTER + 0.38 * np.array([-np.cos(np.radians(a)), np.sin(np.radians(a)), 0.0]) + [0, 0, 0.3]
+def _cameras(center: np.ndarray = CENTER) -> list[np.ndarray]:
+    """Three wrist-camera positions on the arm's side of an object at ``center`` (x, y, 0), as the scan poses
+    place them."""
+    return [center + 0.38 * np.array([-np.cos(np.radians(a)), np.sin(np.radians(a)), 0.0]) + [0, 0, 0.3]
             for a in (-22.0, 0.0, 22.0)]
 
 
@@ -104,10 +105,8 @@ def test_a_top_down_turn_on_the_near_ring_reaches_by_its_low_chains(kin):
     straight down the hand reaches no higher than about 0.17 m there, so no chain with its joint-space moves
     8 cm above the box (0.19 m) is executable, either way round. The same chains 4 cm above it are, both ways,
     and they come after every other chain."""
-    center = np.array([0.40, 0.0])
-    cams = [np.array([*center, 0.0]) + 0.38 * np.array([-np.cos(np.radians(a)), np.sin(np.radians(a)), 0.0])
-            + [0, 0, 0.3] for a in (-22.0, 0.0, 22.0)]
-    xyz, normals = box(NEAR_STROKE_BOX, n=12000, xy=center, view_from=cams)
+    center = np.array([0.40, 0.0, 0.0])
+    xyz, normals = box(NEAR_STROKE_BOX, n=12000, xy=center[:2], view_from=_cameras(center))
     plan = plan_grasps(xyz, normals, table_plane(), replace(GraspService.planner_config(), mode="top_down"))
     assert plan.grasps, plan.explain()
     seqs = turn_sequences(plan.to_messages()[0], TurnMotion(), NEAR_STROKE_BOX[2])
